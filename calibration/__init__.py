@@ -1,0 +1,1 @@
+"""Camera calibration: the `raingauge calibrate` wizard and the shipped camera profiles."""

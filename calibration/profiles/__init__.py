@@ -1,0 +1,1 @@
+"""Camera profiles shipped with raingauge (TOML files beside this module)."""

@@ -1,0 +1,3 @@
+from raingauge.cli import main
+
+raise SystemExit(main())

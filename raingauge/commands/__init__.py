@@ -1,0 +1,1 @@
+"""Subcommands of the ``raingauge`` command line (see :mod:`raingauge.cli`)."""
