@@ -1,0 +1,84 @@
+"""Rain simulator speed: frames/s at 1280x720, 10 mm/h, on one core.
+
+Prints the simulator's rate beside a baseline run in the same process: a
+plain numpy frame copy plus Gaussian sensor noise and 8-bit quantisation (the
+least any renderer of a noisy 1280x720 frame does).  The target is >= 30
+frames/s for the simulator (issue: a one-minute clip in under a minute).
+
+    /work/venv/bin/python benchmarks/bench_simulator.py [--frames 150] [--rate 10] [--camera gauge-default]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numpy as np
+
+
+def _one_core() -> None:
+    try:
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    except (AttributeError, OSError):
+        pass
+    import cv2
+
+    cv2.setNumThreads(1)
+
+
+def baseline(shape, n_frames: int, sigma: float = 2.0) -> float:
+    """frames/s of copy + noise + quantisation with numpy."""
+    rng = np.random.default_rng(0)
+    bg = np.full(shape, 60.0, np.float32)
+    t0 = time.perf_counter()
+    for _ in range(n_frames):
+        x = bg.copy()
+        x += sigma * rng.standard_normal(shape, dtype=np.float32)
+        np.clip(x, 0, 255, out=x)
+        np.rint(x, out=x)
+        x.astype(np.uint8)
+    return n_frames / (time.perf_counter() - t0)
+
+
+def simulator(profile, n_frames: int, rate: float, **kw) -> tuple[float, float]:
+    """(frames/s, mean drops drawn per frame) of the simulator, excluding the first frame."""
+    from raingauge.render.simulator import simulate
+
+    sim = simulate(profile, n_frames=n_frames + 1, rain_rate_mm_h=rate, seed=1, **kw)
+    it = iter(sim)
+    _, ft = next(it)
+    drops = []
+    t0 = time.perf_counter()
+    for _, ft in it:
+        drops.append(len(ft["drops"]))
+    return n_frames / (time.perf_counter() - t0), float(np.mean(drops))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--frames", type=int, default=150)
+    ap.add_argument("--rate", type=float, default=10.0)
+    ap.add_argument("--camera", default="gauge-default")
+    args = ap.parse_args()
+    _one_core()
+    from raingauge.profile import load_profile
+
+    prof = load_profile(args.camera)
+    shape = prof.shape
+    base = baseline(shape, args.frames)
+    rows = [("baseline: numpy copy + noise + quantise", base, None)]
+    fps, nd = simulator(prof, args.frames, args.rate)
+    rows.append((f"simulate {args.rate:g} mm/h ({args.camera}, {shape[1]}x{shape[0]})", fps, nd))
+    fps2, nd2 = simulator(prof, args.frames, args.rate, wind_m_s=5.0, wind_dir_deg=30.0)
+    rows.append((f"simulate {args.rate:g} mm/h, wind 5 m/s", fps2, nd2))
+    fps3, nd3 = simulator(prof, args.frames, 4 * args.rate)
+    rows.append((f"simulate {4 * args.rate:g} mm/h", fps3, nd3))
+    print(f"{'case':55s} {'frames/s':>9s} {'vs baseline':>12s} {'drops/frame':>12s}")
+    for name, f, d in rows:
+        print(f"{name:55s} {f:9.1f} {f / base:12.2f} {'' if d is None else f'{d:12.0f}'}")
+    print(f"target: >= 30 frames/s at 10 mm/h -> {'met' if fps >= 30 else 'NOT met'} ({fps:.1f})")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1038 @@
+"""Per-streak measurement of focused drops (Sec. 8 [GargNayar2007]).
+
+A drop of radius a at depth z, falling at v during the exposure T, draws a
+streak of width w = 2 f a / z and length L = f v T / z + w pixels (Eq. 26 as
+corrected, and Fig. 20(b)).  Inverting, with the depth z,
+
+    a = w z / (2 f),        v = (L - w) z / (f T).                    (Sec. 8)
+
+The gauge measures w and L with sub-pixel accuracy:
+
+* **Length.**  The row sums of the streak's change image along the fall
+  direction form a box of length v_i T (the drop's image motion) convolved
+  with the drop's projected disc and the blur.  That kernel is symmetric, so
+  the two crossings of half the plateau height lie exactly at the ends of the
+  box: their distance is v_i T whatever the blur, sub-pixel by interpolation.
+* **Width.**  The profile across the streak, collected from every row of the
+  plateau and aligned on the streak's axis (a super-resolved profile, as each
+  row samples the axis at another sub-pixel phase), is fitted by the chord of
+  a disc of diameter w (the time a pixel spends under a passing disc,
+  2 sqrt(a^2 - x^2) / v_i, Eq. (29)) convolved with a Gaussian of standard
+  deviation s that holds the pixel's own box (1/12 px^2), the optics and the
+  defocus.  s beyond the sharp-focus value gives the blur circle, hence the
+  depth (depth from defocus, up to the near/far ambiguity that the velocity
+  law resolves).
+
+:class:`StreakProps` computes these lazily, like scikit-image's
+``regionprops``; :func:`detect_streaks` is the gauge's fast path from three
+frames to labelled streaks (Eq. (19) on a change image smoothed along the fall
+direction), with pieces of one streak merged.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import cached_property
+
+import numpy as np
+
+__all__ = [
+    "StreakProps",
+    "StreakSet",
+    "change_images",
+    "detect_streaks",
+    "measure_streaks",
+    "chord_gauss_profile",
+    "fit_cross_profile",
+    "half_level_span",
+    "box_gauss_profile",
+    "PROFILE_SHAPES",
+    "fit_along_profile",
+    "fit_along_profiles",
+    "fit_cross_profiles",
+    "fit_batch",
+    "radius_from_width_m",
+    "velocity_from_length_m_s",
+    "depth_from_blur_m",
+    "SHARP_SIGMA_PX",
+]
+
+#: Standard deviation of a sharp streak edge [px]: the pixel's box (1/12 px^2)
+#: with a small optical spread; the floor of the fitted blur s.
+SHARP_SIGMA_PX = math.sqrt(1.0 / 12.0)
+
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(12)
+
+
+# ---------------------------------------------------------------- equations
+def radius_from_width_m(width_px, z_m, *, focal_length_px: float):
+    """Drop radius from the streak width, a = w z / (2 f) (Sec. 8 [GargNayar2007]).
+
+    Parameters
+    ----------
+    width_px : array_like
+        Focused streak width w [px].
+    z_m : array_like
+        Drop depth z [m].
+    focal_length_px : float
+        Focal length f [px].
+
+    Returns
+    -------
+    ndarray
+        Radius a [m].
+
+    Notes
+    -----
+    Inverse of Eq. (26) as corrected, w = 2 f a / z (the text's f z / a is a
+    slip); valid while w > 1 px.
+    """
+    return np.asarray(width_px, dtype=float) * np.asarray(z_m, dtype=float) / (2.0 * focal_length_px)
+
+
+def velocity_from_length_m_s(length_px, width_px, z_m, *, focal_length_px: float, exposure_s: float):
+    """Drop speed from the streak length, v = (L - w) z / (f T) (Sec. 8 [GargNayar2007]).
+
+    Parameters
+    ----------
+    length_px : array_like
+        Streak length L [px] (end to end, the drop's image included).
+    width_px : array_like
+        Streak width w [px].
+    z_m : array_like
+        Depth z [m].
+    focal_length_px : float
+        Focal length f [px].
+    exposure_s : float
+        Exposure time T [s].
+
+    Returns
+    -------
+    ndarray
+        Speed [m/s].
+    """
+    motion = np.asarray(length_px, dtype=float) - np.asarray(width_px, dtype=float)
+    return motion * np.asarray(z_m, dtype=float) / (focal_length_px * exposure_s)
+
+
+def depth_from_blur_m(blur_px, *, focal_length_px: float, f_number: float, focus_distance_m: float,
+                      pixel_pitch_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """The two depths whose thin-lens blur circle has diameter b [Horn1986].
+
+    Inverts ``raingauge.physics.camera.blur_circle_px``:
+    b = K |z - z0| / z with K = (f_m/N) f_m / ((z0 - f_m) p), so
+    z_near = K z0 / (K + b) and z_far = K z0 / (K - b) (infinite when b >= K).
+
+    Parameters
+    ----------
+    blur_px : array_like
+        Blur-circle diameter b [px] (>= 0).
+    focal_length_px, f_number, focus_distance_m, pixel_pitch_m : float
+        Camera: f [px], N [-], z0 [m], pixel pitch [m].
+
+    Returns
+    -------
+    (z_near, z_far) : ndarrays [m]
+    """
+    fm = focal_length_px * pixel_pitch_m
+    k = (fm / f_number) * fm / ((focus_distance_m - fm) * pixel_pitch_m)
+    b = np.abs(np.asarray(blur_px, dtype=float))
+    z0 = focus_distance_m
+    near = k * z0 / (k + b)
+    with np.errstate(divide="ignore"):
+        far = np.where(b < k, k * z0 / np.maximum(k - b, 1e-300), np.inf)
+    return near, far
+
+
+# ---------------------------------------------------------------- 1-D fits
+def chord_gauss_profile(xi, *, amplitude: float, centre: float, width: float, sigma: float):
+    """Cross-profile of a streak: a disc's chord convolved with a Gaussian.
+
+    m(x) = A int sqrt(1 - (2u/w)^2) g_s(x - x0 - u) du / int g_s,
+    the time a pixel at offset x spends under a disc of diameter w sweeping
+    past (Eq. (29) [GargNayar2007], tau ~ 2 sqrt(a^2 - rho^2) / v), spread by
+    the pixel box, the optics and the defocus (a Gaussian of std s).
+
+    Parameters
+    ----------
+    xi : array_like
+        Offsets across the streak [px].
+    amplitude : float
+        Peak of the sharp chord A [gray levels].
+    centre : float
+        Axis position x0 [px].
+    width : float
+        Chord (drop image) diameter w [px] (> 0).
+    sigma : float
+        Gaussian standard deviation s [px] (> 0).
+
+    Returns
+    -------
+    ndarray
+        Profile [gray levels], the shape of ``xi``.
+    """
+    x = np.asarray(xi, dtype=float)[..., None] - centre
+    half = 0.5 * width
+    u = half * _GL_X
+    chord = np.sqrt(np.clip(1.0 - _GL_X ** 2, 0.0, None))
+    g = np.exp(-0.5 * ((x - u) / sigma) ** 2) / (sigma * math.sqrt(2 * math.pi))
+    return amplitude * half * np.sum(_GL_W * chord * g, axis=-1)
+
+
+def _lm_batch(model, p0, lo, hi, y, wts, *, iters: int = 16):
+    """Levenberg-Marquardt on B independent problems at once (padding has weight 0).
+
+    ``model(P)`` maps (B, n) parameters to (B, K) predictions of the B data rows.
+    Returns (P, J, residuals) with J the (B, K, n) Jacobian of the weighted residuals.
+    """
+    p = np.clip(np.asarray(p0, dtype=float), lo, hi)
+    b, n = p.shape
+    lam = np.full(b, 1e-2)
+
+    def resid(pp):
+        return (model(pp) - y) * wts
+
+    def jacobian(pp, r0):
+        h = 1e-4 * np.maximum(np.abs(pp), 1e-2)
+        cols = []
+        for j in range(n):
+            q = pp.copy()
+            q[:, j] += h[:, j]
+            cols.append((resid(q) - r0) / h[:, j:j + 1])
+        return np.stack(cols, axis=-1)
+
+    r = resid(p)
+    cost = np.einsum("bk,bk->b", r, r)
+    eye = np.eye(n)
+    jac = jacobian(p, r)
+    for _ in range(iters):
+        jtj = np.einsum("bkn,bkm->bnm", jac, jac)
+        g = np.einsum("bkn,bk->bn", jac, r)
+        diag = np.einsum("bnn->bn", jtj)
+        a = jtj + (lam[:, None] * (diag + 1e-9))[:, :, None] * eye
+        try:
+            step = -np.linalg.solve(a, g[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            step = -g / (lam[:, None] * (diag + 1e-9) + 1e-12)
+        pn = np.clip(p + step, lo, hi)
+        rn = resid(pn)
+        cn = np.einsum("bk,bk->b", rn, rn)
+        better = cn < cost
+        if np.any(better):
+            p[better] = pn[better]
+            r[better] = rn[better]
+            cost[better] = cn[better]
+            jac_new = jacobian(p, r)
+            jac[better] = jac_new[better]
+        lam = np.where(better, np.maximum(lam / 5, 1e-7), np.minimum(lam * 8, 1e8))
+    return p, jac, r
+
+
+def _param_errors(jac, r, dof):
+    """Standard errors of the parameters from the (B, K, n) Jacobian (B, n)."""
+    s2 = np.einsum("bk,bk->b", r, r) / np.maximum(dof, 1)
+    jtj = np.einsum("bkn,bkm->bnm", jac, jac)
+    cov = np.linalg.pinv(jtj) * s2[:, None, None]
+    return cov
+
+
+def _chord_gauss_batch(xi, params):
+    amp, cen, w, s = (params[:, k][:, None, None] for k in range(4))
+    x = xi[None, :, None] - cen
+    half = 0.5 * w
+    u = half * _GL_X[None, None, :]
+    chord = np.sqrt(np.clip(1.0 - _GL_X ** 2, 0.0, None))
+    g = np.exp(-0.5 * ((x - u) / s) ** 2) / (s * math.sqrt(2 * math.pi))
+    return (amp[..., 0] * half[..., 0]) * np.sum(_GL_W * chord * g, axis=-1)
+
+
+def _box_gauss_batch(xi, params):
+    from scipy.special import erf
+
+    amp, cen, w, s = (params[:, k][:, None] for k in range(4))
+    x = (xi if np.ndim(xi) == 2 else xi[None, :]) - cen
+    k = 1.0 / (math.sqrt(2.0) * s)
+    return 0.5 * amp * (erf((x + 0.5 * w) * k) - erf((x - 0.5 * w) * k))
+
+
+def box_gauss_profile(xi, *, amplitude: float, centre: float, width: float, sigma: float):
+    """Cross-profile of a uniform streak: a box of width w convolved with a Gaussian.
+
+    The paper takes the time tau a drop spends over a pixel as the same for
+    every pixel of a streak (Appendix 10.2 [GargNayar2007]: "tau and beta are
+    constant for all pixels on a streak"), and Eqs. (23)-(24) spread a
+    defocused drop uniformly over a streak w + b_c wide: across the streak
+    the change is a box.
+
+    Parameters
+    ----------
+    xi : array_like
+        Offsets across the streak [px].
+    amplitude : float
+        Height of the box [gray levels].
+    centre : float
+        Axis position [px].
+    width : float
+        Box width [px] (> 0).
+    sigma : float
+        Gaussian standard deviation (pixel box, optics) [px] (> 0).
+    """
+    p = np.array([[amplitude, centre, width, sigma]], dtype=float)
+    return _box_gauss_batch(np.asarray(xi, dtype=float).ravel(), p)[0].reshape(np.shape(xi))
+
+
+#: Cross-profile shapes: ``"uniform"`` (the paper's constant tau, Eqs. 23-24) or
+#: ``"chord"`` (tau ~ 2 sqrt(a^2 - rho^2) / v of Eq. (29) resolved across the streak).
+PROFILE_SHAPES = ("uniform", "chord")
+
+
+def fit_cross_profile(xi, values, *, sigma_min: float = SHARP_SIGMA_PX, weights=None,
+                      shape: str = "uniform") -> dict:
+    """Least-squares fit of a streak's cross-profile (one streak; see :func:`fit_cross_profiles`).
+
+    Parameters
+    ----------
+    xi : (K,) array
+        Offsets across the streak [px].
+    values : (K,) array
+        Mean change at those offsets [gray levels].
+    sigma_min : float
+        Smallest allowed s, the sharp-focus spread [px].
+    weights : (K,) array, optional
+        Inverse standard errors of ``values``.
+    shape : str
+        ``"uniform"`` (:func:`box_gauss_profile`, the paper's model) or
+        ``"chord"`` (:func:`chord_gauss_profile`).
+
+    Returns
+    -------
+    dict
+        ``amplitude, centre, width, sigma`` and the standard errors
+        ``width_err, sigma_err``; ``width_apparent``, the width of a sharp
+        profile of the same shape and variance (blur included); ``ok``.
+    """
+    w = None if weights is None else np.asarray(weights, dtype=float)
+    return fit_cross_profiles([(np.asarray(xi, dtype=float), np.asarray(values, dtype=float), w)],
+                              sigma_min=sigma_min, shape=shape)[0]
+
+
+_BAD_CROSS = {"amplitude": 0.0, "centre": 0.0, "width": float("nan"), "sigma": float("nan"),
+              "width_err": float("inf"), "sigma_err": float("inf"), "width_apparent": float("nan"),
+              "ok": False}
+
+
+def _pad(arrays, fill=0.0):
+    k = max(a.size for a in arrays)
+    out = np.full((len(arrays), k), fill, dtype=float)
+    for i, a in enumerate(arrays):
+        out[i, :a.size] = a
+    return out
+
+
+def fit_cross_profiles(data, *, sigma_min: float = SHARP_SIGMA_PX, shape: str = "uniform") -> list[dict]:
+    """Fit many cross-profiles at once (one Levenberg-Marquardt over the batch).
+
+    Parameters
+    ----------
+    data : list of (xi, values, weights)
+        Per streak: offsets [px], mean change [gray levels], inverse standard
+        errors (or None).
+    sigma_min : float
+        Smallest allowed s [px].
+    shape : str
+        ``"uniform"`` or ``"chord"`` (see :func:`fit_cross_profile`).
+
+    Returns
+    -------
+    list of dicts as :func:`fit_cross_profile`.
+    """
+    if shape not in PROFILE_SHAPES:
+        raise ValueError(f"unknown profile shape {shape!r}; valid: {list(PROFILE_SHAPES)}")
+    var_k = 12.0 if shape == "uniform" else 16.0
+    out: list[dict | None] = [None] * len(data)
+    rows = []
+    for i, (xi, y, wts) in enumerate(data):
+        xi = np.asarray(xi, dtype=float)
+        y = np.asarray(y, dtype=float)
+        if xi.size < 6:
+            out[i] = dict(_BAD_CROSS)
+            continue
+        wts = np.ones_like(y) if wts is None else np.asarray(wts, dtype=float)
+        pos = np.clip(y, 0.0, None)
+        total = pos.sum()
+        if total <= 0:
+            out[i] = dict(_BAD_CROSS)
+            continue
+        c0 = float(np.sum(pos * xi) / total)
+        var0 = float(np.sum(pos * (xi - c0) ** 2) / total)
+        w0 = max(math.sqrt(var_k * max(var0 - sigma_min ** 2, 0.04)), 0.6)
+        step = float(np.median(np.diff(np.sort(xi))))
+        a0 = max(total * step / ((1.0 if shape == "uniform" else math.pi / 4) * w0), 1e-3)
+        rows.append((i, xi, y, wts, [a0, c0, w0, sigma_min * 1.2],
+                     [0.0, c0 - 3.0, 0.2, sigma_min],
+                     [np.inf, c0 + 3.0, max(4 * w0 + 10, 50.0), max(20.0, 3 * w0)]))
+    if rows:
+        idx = [r[0] for r in rows]
+        xi = _pad([r[1] for r in rows])
+        y = _pad([r[2] for r in rows])
+        wts = _pad([r[3] for r in rows])
+        p0 = np.array([r[4] for r in rows])
+        lo = np.array([r[5] for r in rows])
+        hi = np.array([r[6] for r in rows])
+        if shape == "uniform":
+            def model(P):
+                return _box_gauss_batch(xi, P)
+        else:
+            def model(P):
+                return np.stack([_chord_gauss_batch(xi[j], P[j:j + 1])[0] for j in range(P.shape[0])])
+        p, jac, r = _lm_batch(model, p0, lo, hi, y, wts)
+        dof = np.array([row[1].size for row in rows]) - 4
+        try:
+            cov = _param_errors(jac, r, dof)
+            errs = np.sqrt(np.clip(np.einsum("bnn->bn", cov), 0.0, None))
+        except np.linalg.LinAlgError:
+            errs = np.full(p.shape, np.inf)
+        for j, i in enumerate(idx):
+            amp, cen, w, sg = (float(v) for v in p[j])
+            w_app = math.sqrt(var_k * max(w * w / var_k + sg * sg - sigma_min ** 2, 0.0))
+            out[i] = {"amplitude": amp, "centre": cen, "width": w, "sigma": sg,
+                      "width_err": float(errs[j, 2]), "sigma_err": float(errs[j, 3]),
+                      "width_apparent": w_app, "ok": True}
+    return out
+
+
+def _semicircle_cdf_gauss_batch(t, radius, sigma):
+    """CDF of the projection of a disc of ``radius`` convolved with a Gaussian (B, K)."""
+    from scipy.special import ndtr
+
+    u = radius[:, None, None] * _GL_X[None, None, :]
+    dens = (2.0 / math.pi) * np.sqrt(np.clip(1.0 - _GL_X ** 2, 0.0, None))  # per unit of x in [-1,1]
+    return np.sum(_GL_W * dens * ndtr((t[..., None] - u) / sigma[:, None, None]), axis=-1)
+
+
+def _cap_integral(u):
+    """int_{-1}^{u} sqrt(1 - x^2) dx for u clipped to [-1, 1]."""
+    u = np.clip(u, -1.0, 1.0)
+    return 0.5 * (u * np.sqrt(1.0 - u * u) + np.arcsin(u)) + math.pi / 4
+
+
+def _capsule_cumulative(t, top, bot, r):
+    """int_{-inf}^{t} of the capsule's row profile (unit plateau, caps of radius r)."""
+    upper = r * _cap_integral((np.minimum(t, top) - top) / r)
+    middle = np.clip(np.minimum(t, bot) - top, 0.0, None)
+    lower = np.where(t > bot, r * (_cap_integral(np.clip((t - bot) / r, 0.0, 1.0)) - math.pi / 4), 0.0)
+    return upper + middle + lower
+
+
+def _ends_batch(t_top, t_bot, radius, sigma, shape):
+    """Row-sum profile (B, K) of a streak with ends at rows top/bottom (unit plateau)."""
+    if shape == "uniform":
+        # pixel-integrated capsule: rows integrate [y - 1/2, y + 1/2]
+        r = radius[:, None]
+        length = t_top - t_bot              # bottom - top, per row (constant)
+        hi = _capsule_cumulative(t_top + 0.5, 0.0, length, r)
+        lo = _capsule_cumulative(t_top - 0.5, 0.0, length, r)
+        return hi - lo
+    ga = _semicircle_cdf_gauss_batch(t_top, radius, sigma)
+    gb = _semicircle_cdf_gauss_batch(t_bot, radius, sigma)
+    return ga - gb
+
+
+def fit_along_profile(rows, sums, *, width: float, sigma: float, top0: float, bottom0: float,
+                      weights=None, shape: str = "uniform") -> dict:
+    """Fit the row sums along a streak; the motion is the distance between its ends.
+
+    ``shape="uniform"`` (the paper's constant tau, Eqs. 23-24): the streak is
+    the capsule swept by the drop's image (diameter w, blur included) with a
+    constant change inside, so the row sums are a plateau with semicircular
+    caps, sqrt(1 - ((y - y_end) / (w/2))^2), beyond the rows y_top and
+    y_bottom of the drop centre at the start and end of the exposure.
+    ``shape="chord"``: a disc sweeping, the plateau convolved with the
+    projection of the disc (Fig. 20(b) [GargNayar2007]).  Either way the
+    motion y_bottom - y_top does not depend on the blur.
+
+    Parameters
+    ----------
+    rows : (K,) array
+        Row coordinates [px].
+    sums : (K,) array
+        Change summed across the streak on each row [gray levels px].
+    width, sigma : float
+        Streak width w and edge spread s [px].
+    top0, bottom0 : float
+        Starting guesses of y_top, y_bottom [px] (half-level crossings).
+    weights : (K,) array, optional
+        Inverse standard errors of ``sums``.
+    shape : str
+        ``"uniform"`` or ``"chord"``.
+
+    Returns
+    -------
+    dict with ``plateau, top, bottom, motion, motion_err``.
+    """
+    w = None if weights is None else np.asarray(weights, dtype=float)
+    return fit_along_profiles([(np.asarray(rows, dtype=float), np.asarray(sums, dtype=float), w,
+                                float(width), float(sigma), float(top0), float(bottom0))], shape=shape)[0]
+
+
+def fit_along_profiles(data, *, shape: str = "uniform") -> list[dict]:
+    """Fit many along-streak row-sum profiles at once (see :func:`fit_along_profile`).
+
+    Parameters
+    ----------
+    data : list of (rows, sums, weights, width, sigma, top0, bottom0)
+    shape : str
+        ``"uniform"`` or ``"chord"``.
+    """
+    if not data:
+        return []
+    rows_l, y_l, w_l, p0, lo, hi, rad, sig, rel0 = [], [], [], [], [], [], [], [], []
+    for rows, y, wts, width, sigma, top0, bottom0 in data:
+        wts = np.ones_like(y) if wts is None else wts
+        r = max(width, 0.2) / 2.0
+        c = 0.87 * r if shape == "uniform" else 0.0
+        t0, b0 = top0 + c, bottom0 - c
+        inner = (rows > t0 + width) & (rows < b0 - width)
+        plat0 = float(np.median(y[inner])) if inner.sum() >= 2 else float(np.max(y))
+        rows_l.append(rows - rows[0])
+        rel0.append(rows[0])
+        y_l.append(y)
+        w_l.append(wts)
+        p0.append([plat0, t0 - rows[0], b0 - rows[0]])
+        lo.append([0.0, -5.0, -5.0])
+        hi.append([np.inf, rows[-1] - rows[0] + 5.0, rows[-1] - rows[0] + 5.0])
+        rad.append(r)
+        sig.append(max(sigma, 1e-3))
+    n_k = np.array([a.size for a in rows_l])
+    # pad rows with far-away coordinates (weight 0)
+    rows = _pad(rows_l, fill=-1e6)
+    y = _pad(y_l)
+    wts = _pad(w_l)
+    rad = np.array(rad)
+    sig = np.array(sig)
+
+    def model(P):
+        plat, top, bot = P[:, 0:1], P[:, 1:2], P[:, 2:3]
+        return plat * _ends_batch(rows - top, rows - bot, rad, sig, shape)
+
+    p, jac, res = _lm_batch(model, np.array(p0), np.array(lo), np.array(hi), y, wts)
+    try:
+        cov = _param_errors(jac, res, n_k - 3)
+        m_err = np.sqrt(np.clip(cov[:, 1, 1] + cov[:, 2, 2] - 2 * cov[:, 1, 2], 0.0, None))
+    except np.linalg.LinAlgError:
+        m_err = np.full(len(data), np.inf)
+    out = []
+    for j in range(len(data)):
+        top = float(p[j, 1] + rel0[j])
+        bot = float(p[j, 2] + rel0[j])
+        out.append({"plateau": float(p[j, 0]), "top": top, "bottom": bot, "motion": bot - top,
+                    "motion_err": float(m_err[j])})
+    return out
+
+
+def half_level_span(profile, level: float) -> tuple[float, float] | None:
+    """Sub-pixel positions where a 1-D profile first and last crosses ``level``.
+
+    Parameters
+    ----------
+    profile : (K,) array
+        Samples at positions 0..K-1 [any unit].
+    level : float
+        Crossing level [same unit].
+
+    Returns
+    -------
+    (first, last) [samples], or None when the profile never reaches the level.
+    """
+    p = np.asarray(profile, dtype=float)
+    above = np.nonzero(p >= level)[0]
+    if above.size == 0:
+        return None
+    i0, i1 = int(above[0]), int(above[-1])
+    if i0 > 0:
+        a, b = p[i0 - 1], p[i0]
+        first = i0 - 1 + (level - a) / (b - a) if b != a else float(i0)
+    else:
+        first = 0.0
+    if i1 < p.size - 1:
+        a, b = p[i1], p[i1 + 1]
+        last = i1 + (a - level) / (a - b) if a != b else float(i1)
+    else:
+        last = float(p.size - 1)
+    return float(first), float(last)
+
+
+# ---------------------------------------------------------------- detection
+def change_images(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The spike and change images of frame n.
+
+    Parameters
+    ----------
+    prev, cur, nxt : (M, N) float32 arrays
+        Linearised frames n-1, n, n+1 [gray levels].
+
+    Returns
+    -------
+    spike : (M, N) float32
+        min(I_n - I_{n-1}, I_n - I_{n+1}), the left side of Eq. (19) [GargNayar2007].
+    change : (M, N) float32
+        I_n - (I_{n-1} + I_{n+1}) / 2, the drop's change over its background, used
+        for measuring (unbiased, with 1.5x the noise variance of one frame).
+    """
+    import cv2
+
+    d1 = cv2.subtract(cur, prev)
+    d2 = cv2.subtract(cur, nxt)
+    spike = cv2.min(d1, d2)
+    change = cv2.addWeighted(d1, 0.5, d2, 0.5, 0.0)
+    return spike, change
+
+
+def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min_pixels: int = 6,
+                   merge_gap_px: float = 6.0) -> tuple[np.ndarray, np.ndarray]:
+    """Label candidate streaks: Eq. (19) on a change image smoothed along the fall.
+
+    Parameters
+    ----------
+    spike : (M, N) float32 array
+        min(I_n - I_{n-1}, I_n - I_{n+1}) [gray levels] (see :func:`change_images`).
+    c : float
+        Detection threshold [gray levels] (the profile's ``detection_threshold_dn``).
+    smooth_px : int
+        Length of the vertical box filter [px] (odd); rain streaks are long
+        along the fall, so averaging along it raises their signal to noise by
+        sqrt(smooth_px) while isolated noise spikes fade.  1 disables it.
+    min_pixels : int
+        Smallest component kept [px].
+    merge_gap_px : float
+        Pieces of one streak (split by a dark background stretch or by noise)
+        are merged when they are collinear within their widths and the gap
+        between them is at most this [px].
+
+    Returns
+    -------
+    labels : (M, N) int32 array
+        0 for background, 1..n for streaks (merged pieces share a label).
+    stats : (n + 1, 5) int array
+        x, y, width, height, area of each label (row 0 the background), as
+        ``cv2.connectedComponentsWithStats``.
+    """
+    import cv2
+
+    if not (c > 0 and math.isfinite(c)):
+        raise ValueError(f"detection threshold c must be a positive number of gray levels, got {c!r}")
+    s = spike if smooth_px <= 1 else cv2.blur(spike, (1, int(smooth_px)))
+    mask = cv2.compare(s, float(c), cv2.CMP_GE)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8, ltype=cv2.CV_32S)
+    stats = stats[:, :5].copy()
+    keep = stats[:, 4] >= min_pixels
+    keep[0] = True
+    remap = np.zeros(n, dtype=np.int32)
+    remap[keep] = np.arange(int(keep.sum()), dtype=np.int32)
+    stats = stats[keep]
+    # merge collinear pieces separated by a short vertical gap
+    if stats.shape[0] > 2 and merge_gap_px > 0:
+        parent = np.arange(stats.shape[0])
+
+        def find(i):
+            while parent[i] != i:
+                parent[i] = parent[parent[i]]
+                i = parent[i]
+            return i
+
+        x, y, w, h = (stats[1:, k].astype(float) for k in range(4))
+        cx = x + w / 2
+        order = np.argsort(cx)
+        idx = np.arange(1, stats.shape[0])[order]
+        cxs = cx[order]
+        for a_i in range(idx.size):
+            ia = idx[a_i]
+            xa, ya, wa, ha = stats[ia, :4]
+            j = a_i + 1
+            while j < idx.size and cxs[j] - cxs[a_i] <= max(wa, 3) + 2:
+                ib = idx[j]
+                xb, yb, wb, hb = stats[ib, :4]
+                gap = max(yb - (ya + ha), ya - (yb + hb))
+                overlap_x = min(xa + wa, xb + wb) - max(xa, xb)
+                if 0 <= gap <= merge_gap_px and overlap_x > -1 and 0.5 <= (wa + 1) / (wb + 1) <= 2.0:
+                    parent[find(ib)] = find(ia)
+                j += 1
+        roots = np.array([find(i) for i in range(stats.shape[0])])
+        if np.any(roots != np.arange(stats.shape[0])):
+            uniq, new_ids = np.unique(roots, return_inverse=True)
+            merged = np.zeros((uniq.size, 5), dtype=stats.dtype)
+            for new, root in enumerate(uniq):
+                members = np.nonzero(roots == root)[0]
+                xs = stats[members, 0]
+                ys = stats[members, 1]
+                x1 = (stats[members, 0] + stats[members, 2]).max()
+                y1 = (stats[members, 1] + stats[members, 3]).max()
+                merged[new] = [xs.min(), ys.min(), x1 - xs.min(), y1 - ys.min(), stats[members, 4].sum()]
+            remap = np.where(keep, new_ids[remap], 0).astype(np.int32)
+            stats = merged
+            remap[0] = 0
+    labels = remap[labels]
+    return labels, stats
+
+
+# ---------------------------------------------------------------- per streak
+class StreakProps:
+    """Measurements of one streak, computed lazily (like ``skimage.measure.regionprops``).
+
+    Parameters
+    ----------
+    label : int
+        The streak's label in ``labels``.
+    bbox : (x, y, width, height) ints
+        Bounding box of its detected pixels [px].
+    change : (M, N) float32 array
+        I_n - (I_{n-1} + I_{n+1}) / 2 [gray levels].
+    labels : (M, N) int array
+        Streak labels (other streaks are masked out of the measurement).
+    camera : CameraProfile
+        Focal length, exposure, F-number, focus distance and pitch.
+    margin_px : int
+        Extra pixels around the box to catch the blurred ends and sides.
+    noise_sigma : float
+        Noise of ``change`` [gray levels].
+    prev, cur : (M, N) arrays, optional
+        Frames n-1 and n, for the photometric test of Eq. (18).
+    shape : str
+        Cross-profile model, ``"uniform"`` or ``"chord"`` (:func:`fit_cross_profile`).
+    """
+
+    def __init__(self, label: int, bbox, change: np.ndarray, labels: np.ndarray, camera, *,
+                 margin_px: int = 4, noise_sigma: float = 2.0, prev: np.ndarray | None = None,
+                 cur: np.ndarray | None = None, shape: str = "uniform"):
+        self.label = int(label)
+        self.bbox = tuple(int(v) for v in bbox)
+        self._change = change
+        self._labels = labels
+        self.camera = camera
+        self.margin_px = int(margin_px)
+        self.noise_sigma = float(noise_sigma)
+        self._prev = prev
+        self._cur = cur
+        self.shape = shape
+
+    # -- geometry of the crop
+    @cached_property
+    def _crop(self):
+        x, y, w, h = self.bbox
+        m = self.margin_px
+        mh = m + max(2, w // 2)
+        rows, cols = self._change.shape
+        x0, x1 = max(x - mh, 0), min(x + w + mh, cols)
+        y0, y1 = max(y - m, 0), min(y + h + m, rows)
+        lab = self._labels[y0:y1, x0:x1]
+        own = lab == self.label
+        other = (lab != 0) & ~own
+        img = self._change[y0:y1, x0:x1].astype(np.float64)
+        return x0, y0, img, own, other
+
+    @cached_property
+    def clipped(self) -> bool:
+        """True when the streak touches the frame edge (its length or width is cut)."""
+        x, y, w, h = self.bbox
+        rows, cols = self._change.shape
+        return x <= 0 or y <= 0 or x + w >= cols or y + h >= rows
+
+    @cached_property
+    def axis(self) -> tuple[float, float, float]:
+        """The streak's axis x = x_mid + slope (y - y_mid): (x_mid, y_mid, slope) [px, px, px/px]."""
+        x0, y0, img, own, other = self._crop
+        wts = np.where(own, np.clip(img, 0, None), 0.0)
+        tot = wts.sum()
+        if tot <= 0:
+            x, y, w, h = self.bbox
+            return x + w / 2.0, y + h / 2.0, 0.0
+        yy, xx = np.mgrid[0:img.shape[0], 0:img.shape[1]]
+        xm = float((wts * xx).sum() / tot)
+        ym = float((wts * yy).sum() / tot)
+        myy = float((wts * (yy - ym) ** 2).sum() / tot)
+        mxy = float((wts * (xx - xm) * (yy - ym)).sum() / tot)
+        slope = mxy / myy if myy > 1e-9 else 0.0
+        return xm + x0, ym + y0, slope
+
+    @cached_property
+    def _rows(self):
+        """Per-row sums and aligned samples across the streak."""
+        x0, y0, img, own, other = self._crop
+        xm, ym, slope = self.axis
+        x, y, w, h = self.bbox
+        half = 0.5 * w / math.sqrt(1 + slope * slope) + 1.5 + self.margin_px / 2
+        rows = np.arange(img.shape[0]) + y0
+        cols = np.arange(img.shape[1]) + x0
+        centre = xm + slope * (rows - ym)
+        off = cols[None, :] - centre[:, None]
+        band = (np.abs(off) <= half) & ~other
+        row_sum = np.where(band, img, 0.0).sum(axis=1)
+        row_n = band.sum(axis=1)
+        return rows, off, band, row_sum, row_n, img
+
+    @cached_property
+    def _ends(self):
+        """Rough ends: half-plateau crossings of the (3-row smoothed) row sums."""
+        rows, off, band, row_sum, row_n, img = self._rows
+        x, y, w, h = self.bbox
+        sm = np.convolve(row_sum, np.ones(3) / 3.0, mode="same")
+        inner = (rows >= y + 0.25 * h) & (rows <= y + 0.75 * h)
+        if inner.sum() < 2:
+            inner = np.ones_like(rows, dtype=bool)
+        plateau = float(np.median(sm[inner]))
+        if plateau <= 0:
+            return None
+        span = half_level_span(sm, 0.5 * plateau)
+        if span is None:
+            return None
+        return span[0] + rows[0], span[1] + rows[0], plateau
+
+    def _along_data(self):
+        """(rows, sums, weights, width, sigma, top0, bottom0) for the along fit, or None."""
+        ends = self._ends
+        if ends is None:
+            return None
+        fit = self.cross_fit
+        if not fit["ok"]:
+            return None
+        rows, off, band, row_sum, row_n, img = self._rows
+        wts = 1.0 / (max(self.noise_sigma, 1e-3) * np.sqrt(np.maximum(row_n, 1)))
+        return (rows.astype(float), row_sum, wts, fit["width_apparent"], SHARP_SIGMA_PX, ends[0], ends[1])
+
+    @cached_property
+    def along_fit(self) -> dict | None:
+        """Fit of the row sums along the streak (see :func:`fit_along_profile`)."""
+        data = self._along_data()
+        if data is None:
+            return None
+        return fit_along_profiles([data], shape=self.shape)[0]
+
+    @cached_property
+    def motion_y_px(self) -> float:
+        """Vertical image motion of the drop during the exposure, v_y T [px].
+
+        From the fit of the row sums (:attr:`along_fit`): the distance between
+        the drop centre's rows at the start and the end of the exposure,
+        independent of the blur.
+        """
+        fit = self.along_fit
+        if fit is None:
+            return float("nan")
+        return max(fit["motion"], 0.0)
+
+    @cached_property
+    def motion_err_px(self) -> float:
+        """Standard error of :attr:`motion_y_px` [px]."""
+        fit = self.along_fit
+        return float("inf") if fit is None else fit["motion_err"]
+
+    @cached_property
+    def motion_px(self) -> tuple[float, float]:
+        """Image motion during the exposure (dx, dy) [px]."""
+        my = self.motion_y_px
+        return (self.axis[2] * my, my)
+
+    @cached_property
+    def row_plateau(self) -> float:
+        """Change summed across the streak in its middle [gray levels px]."""
+        fit = self.along_fit
+        return float("nan") if fit is None else fit["plateau"]
+
+    def _cross_data(self):
+        """(offsets, mean change, weights) of the aligned cross-profile, or None."""
+        rows, off, band, row_sum, row_n, img = self._rows
+        ends = self._ends
+        if ends is None:
+            return None
+        top, bot, _ = ends
+        w_guess = max(self.bbox[2] / math.sqrt(1 + self.axis[2] ** 2) - 2, 1.0)
+        sel = (rows >= top + 0.5 * w_guess + 1) & (rows <= bot - 0.5 * w_guess - 1)
+        if sel.sum() < 2:
+            mid = 0.5 * (top + bot)
+            sel = np.abs(rows - mid) <= 1.0
+        cos_t = 1.0 / math.sqrt(1 + self.axis[2] ** 2)
+        o = off[sel][band[sel]] * cos_t
+        v = img[sel][band[sel]]
+        if o.size < 6:
+            return None
+        bin_w = 0.5
+        k = np.floor(o / bin_w).astype(int)
+        kmin = k.min()
+        counts = np.bincount(k - kmin)
+        sums = np.bincount(k - kmin, weights=v)
+        good = counts > 0
+        xi = (np.nonzero(good)[0] + kmin + 0.5) * bin_w
+        vals = sums[good] / counts[good]
+        wts = np.sqrt(counts[good]) / max(self.noise_sigma, 1e-3)
+        return xi, vals, wts
+
+    @cached_property
+    def cross_fit(self) -> dict:
+        """Fit of the super-resolved cross-profile (see :func:`fit_cross_profile`)."""
+        data = self._cross_data()
+        if data is None:
+            return dict(_BAD_CROSS)
+        return fit_cross_profiles([data], shape=self.shape)[0]
+
+    @cached_property
+    def width_px(self) -> float:
+        """Focused width w of the drop's image [px] (blur removed)."""
+        return float(self.cross_fit["width"])
+
+    @cached_property
+    def width_err_px(self) -> float:
+        """Standard error of :attr:`width_px` [px]."""
+        return float(self.cross_fit["width_err"])
+
+    @cached_property
+    def apparent_width_px(self) -> float:
+        """Width of a sharp streak with the same spread, blur included [px]."""
+        return float(self.cross_fit["width_apparent"])
+
+    @cached_property
+    def blur_px(self) -> float:
+        """Defocus blur-circle diameter b [px] (pillbox: variance b^2/16 beyond sharp focus)."""
+        s = self.cross_fit["sigma"]
+        if not np.isfinite(s):
+            return float("nan")
+        return 4.0 * math.sqrt(max(s * s - SHARP_SIGMA_PX ** 2, 0.0))
+
+    @cached_property
+    def amplitude(self) -> float:
+        """Peak change of the sharp drop image [gray levels]."""
+        return float(self.cross_fit["amplitude"])
+
+    @cached_property
+    def length_px(self) -> float:
+        """Streak length L = |motion| + w [px] (Fig. 20(b))."""
+        dx, dy = self.motion_px
+        return math.hypot(dx, dy) + self.width_px
+
+    @cached_property
+    def centroid_px(self) -> tuple[float, float]:
+        """Centre of the streak (x, y) [px]."""
+        fit = self.along_fit
+        xm, ym, slope = self.axis
+        if fit is None:
+            return xm, ym
+        yc = 0.5 * (fit["top"] + fit["bottom"])
+        return xm + slope * (yc - ym), yc
+
+    @cached_property
+    def top_px(self) -> float:
+        """Row of the drop centre at the start of the exposure [px]."""
+        fit = self.along_fit
+        return float("nan") if fit is None else fit["top"]
+
+    @cached_property
+    def beta_fit(self) -> tuple[float, float] | None:
+        """Photometric slope of Eq. (18) [GargNayar2007]: dI = -beta I_b + alpha.
+
+        Fitted over the streak's own pixels when the background under it
+        varies enough to fix a slope (> 4 gray levels standard deviation);
+        None otherwise.
+        """
+        if self._prev is None or self._cur is None:
+            return None
+        x0, y0, img, own, other = self._crop
+        h, w = img.shape
+        bg = self._prev[y0:y0 + h, x0:x0 + w][own].astype(np.float64)
+        di = (self._cur[y0:y0 + h, x0:x0 + w][own] - self._prev[y0:y0 + h, x0:x0 + w][own]).astype(np.float64)
+        if bg.size < 6 or bg.std() < 4.0:
+            return None
+        slope, intercept = np.polyfit(bg, di, 1)
+        return float(-slope), float(intercept)
+
+    # -- physical units via the camera
+    def radius_m(self, z_m: float | None = None) -> float:
+        """Drop radius a = w z / (2 f) [m], at depth ``z_m`` (default z0)."""
+        z = self.camera.focus_distance_m if z_m is None else z_m
+        return float(radius_from_width_m(self.width_px, z, focal_length_px=self.camera.focal_length_px))
+
+    def velocity_m_s(self, z_m: float | None = None) -> float:
+        """Fall speed (vertical) v = v_y T z / (f T) [m/s], at depth ``z_m`` (default z0)."""
+        z = self.camera.focus_distance_m if z_m is None else z_m
+        return float(self.motion_y_px * z / (self.camera.focal_length_px * self.camera.exposure_s))
+
+    def depth_candidates_m(self) -> tuple[float, float]:
+        """Near and far depths whose blur circle matches :attr:`blur_px` [m]."""
+        cam = self.camera
+        near, far = depth_from_blur_m(self.blur_px, focal_length_px=cam.focal_length_px,
+                                      f_number=cam.f_number, focus_distance_m=cam.focus_distance_m,
+                                      pixel_pitch_m=cam.pixel_pitch_m or 5e-6)
+        return float(near), float(far)
+
+    def depth_m(self, velocity_model: str = "paper", *, min_blur_px: float = 0.5) -> float:
+        """Depth from defocus [m]: z0 while the blur is under ``min_blur_px``;
+        otherwise whichever of the near/far depths makes (a, v) agree best
+        with the velocity law.
+        """
+        from raingauge.physics.drops import fall_velocity
+
+        b = self.blur_px
+        if not np.isfinite(b) or b < min_blur_px:
+            return self.camera.focus_distance_m
+        best, best_err = self.camera.focus_distance_m, float("inf")
+        for z in self.depth_candidates_m():
+            if not np.isfinite(z):
+                continue
+            a = self.radius_m(z)
+            v = self.velocity_m_s(z)
+            law = float(fall_velocity(2 * a, model=velocity_model))
+            if np.isfinite(law) and law > 0 and v > 0:
+                err = abs(math.log(v / law))
+                if err < best_err:
+                    best, best_err = z, err
+        return best
+
+
+class StreakSet(list):
+    """The measured streaks of one frame (a list of :class:`StreakProps`)."""
+
+
+def fit_batch(props, *, shape: str = "uniform") -> None:
+    """Fit the cross and along profiles of many streaks in two batched fits.
+
+    Fills the lazily computed ``cross_fit`` and ``along_fit`` of each
+    :class:`StreakProps` (same results as one by one, much faster).
+    """
+    props = list(props)
+    cross = [(p, p._cross_data()) for p in props]
+    todo = [(p, d) for p, d in cross if d is not None]
+    for p, d in cross:
+        if d is None:
+            p.__dict__["cross_fit"] = dict(_BAD_CROSS)
+    for (p, _), fit in zip(todo, fit_cross_profiles([d for _, d in todo], shape=shape)):
+        p.__dict__["cross_fit"] = fit
+    along = [(p, p._along_data()) for p in props]
+    todo = [(p, d) for p, d in along if d is not None]
+    for p, d in along:
+        if d is None:
+            p.__dict__["along_fit"] = None
+    for (p, _), fit in zip(todo, fit_along_profiles([d for _, d in todo], shape=shape)):
+        p.__dict__["along_fit"] = fit
+
+
+def measure_streaks(change: np.ndarray, labels: np.ndarray, stats: np.ndarray, camera, *,
+                    select=None, noise_sigma: float = 2.0, prev=None, cur=None,
+                    shape: str = "uniform") -> StreakSet:
+    """:class:`StreakProps` for the labelled streaks (all, or the indices in ``select``).
+
+    Parameters
+    ----------
+    change : (M, N) float32 array
+        I_n - (I_{n-1} + I_{n+1}) / 2 [gray levels].
+    labels, stats : from :func:`detect_streaks`.
+    camera : CameraProfile
+    select : iterable of int, optional
+        Labels to measure (default: all).
+    noise_sigma : float
+        Noise of ``change`` [gray levels].
+    """
+    ids = range(1, stats.shape[0]) if select is None else select
+    out = StreakSet()
+    for i in ids:
+        out.append(StreakProps(int(i), stats[i, :4], change, labels, camera, noise_sigma=noise_sigma,
+                               prev=prev, cur=cur, shape=shape))
+    fit_batch(out, shape=shape)
+    return out

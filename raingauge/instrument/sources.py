@@ -1,0 +1,421 @@
+"""Frame sources for the instrument: cameras, streams, files, image folders, simulated rain.
+
+A source yields gray uint8 frames (M, N) of the camera profile's size.  Live
+sources (a camera by OpenCV device index, an RTSP/HTTP stream) raise
+:class:`raingauge.errors.SourceError` when the device vanishes; recorded ones
+(a video file, a folder of images) end; the simulated camera
+(``simulate:RATE``) plays :func:`raingauge.render.simulator.simulate` output
+for ever, chunk after chunk.
+
+:class:`Grabber` runs a source on its own thread, reconnects with exponential
+backoff when it is lost, skips and counts corrupt frames (empty, wrong size or
+type), and hands ``(t_s, frame)`` pairs to the measuring loop through a small
+queue: a live camera drops the oldest frame when the loop falls behind (as a
+camera's driver does), a recorded or simulated source waits (nothing is lost).
+
+Specifications accepted by :func:`open_source`::
+
+    simulate:10          simulated rain at 10 mm/h (real time, or as fast as possible)
+    0, 1, ...            OpenCV device index
+    rtsp://..., http://..., https://...   network stream
+    /path/clip.mkv       video file
+    /path/frames/        folder of images, in name order
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from raingauge.errors import InputError, SourceError
+
+__all__ = [
+    "FrameSource",
+    "CameraSource",
+    "FileSource",
+    "SimulatedSource",
+    "Grabber",
+    "open_source",
+    "scaled_profile",
+    "to_gray",
+]
+
+log = logging.getLogger("raingauge.source")
+
+_STREAM_PREFIXES = ("rtsp://", "rtsps://", "http://", "https://", "rtmp://", "udp://", "tcp://")
+
+
+def to_gray(frame: np.ndarray) -> np.ndarray:
+    """A uint8 (M, N) frame from (M, N), (M, N, 3) BGR or (M, N, 4) BGRA."""
+    frame = np.asarray(frame)
+    if frame.ndim == 3 and frame.shape[2] in (3, 4):
+        import cv2
+
+        code = cv2.COLOR_BGR2GRAY if frame.shape[2] == 3 else cv2.COLOR_BGRA2GRAY
+        frame = cv2.cvtColor(frame, code)
+    if frame.dtype == np.uint16:
+        frame = (frame >> 8).astype(np.uint8)
+    return frame
+
+
+class FrameSource:
+    """Base class: ``open()``, ``read() -> frame | None``, ``close()``.
+
+    Attributes
+    ----------
+    name : what the source is (for logs)
+    live : True for cameras and streams (reconnect on loss), False for files and simulation
+    frame_rate_hz : frames per second [Hz]
+    realtime : recorded sources are paced at ``frame_rate_hz`` when True
+    """
+
+    name = "source"
+    live = False
+    frame_rate_hz: float = 30.0
+    realtime = False
+
+    def open(self) -> None:
+        """Connect; raises SourceError (live) or InputError (files) when impossible."""
+
+    def read(self) -> np.ndarray | None:
+        """Next frame (uint8, gray or BGR); None at the end; raises SourceError when lost."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release the device or file."""
+
+
+class CameraSource(FrameSource):
+    """An OpenCV camera (device index) or network stream (URL)."""
+
+    live = True
+
+    def __init__(self, target: int | str, *, frame_rate_hz: float = 30.0, failures_to_lose: int = 10):
+        self.target = target
+        self.name = f"camera {target}" if isinstance(target, int) else f"stream {target}"
+        self.frame_rate_hz = frame_rate_hz
+        self.failures_to_lose = failures_to_lose
+        self._cap = None
+        self._failures = 0
+        self.failed_reads = 0
+
+    def open(self) -> None:
+        import cv2
+
+        cap = cv2.VideoCapture(self.target)
+        if not cap.isOpened():
+            cap.release()
+            raise SourceError(f"{self.name}: cannot be opened. Fix: check the cable/URL, that no other program "
+                              "holds the camera, and the device permissions (group video)")
+        fps = cap.get(cv2.CAP_PROP_FPS)
+        if fps and 0 < fps < 1000:
+            self.frame_rate_hz = float(fps)
+        self._cap = cap
+        self._failures = 0
+
+    def read(self) -> np.ndarray | None:
+        if self._cap is None:
+            raise SourceError(f"{self.name}: not open")
+        ok, frame = self._cap.read()
+        if not ok or frame is None:
+            self._failures += 1
+            self.failed_reads += 1
+            if self._failures >= self.failures_to_lose:
+                raise SourceError(f"{self.name}: {self._failures} reads in a row failed (camera gone?)")
+            return np.empty((0, 0), np.uint8)  # counted as corrupt by the grabber
+        self._failures = 0
+        return frame
+
+    def close(self) -> None:
+        if self._cap is not None:
+            self._cap.release()
+            self._cap = None
+
+
+class FileSource(FrameSource):
+    """A video file or a folder of images, via :class:`raingauge.videoio.FrameReader`."""
+
+    def __init__(self, path: str | Path, *, frame_rate_hz: float = 30.0, realtime: bool = False):
+        self.path = Path(path)
+        self.name = f"file {self.path}"
+        self.frame_rate_hz = frame_rate_hz
+        self.realtime = realtime
+        self._iter: Iterator[np.ndarray] | None = None
+        self._reader = None
+
+    @property
+    def corrupt_frames(self) -> int:
+        return 0 if self._reader is None else self._reader.corrupt_frames
+
+    def open(self) -> None:
+        from raingauge.videoio import FrameReader
+
+        self._reader = FrameReader(self.path, mode="gray")
+        if self._reader.fps:
+            self.frame_rate_hz = float(self._reader.fps)
+        self._iter = iter(self._reader)
+
+    def read(self) -> np.ndarray | None:
+        if self._iter is None:
+            raise SourceError(f"{self.name}: not open")
+        return next(self._iter, None)
+
+    def close(self) -> None:
+        self._iter = None
+
+
+class SimulatedSource(FrameSource):
+    """The built-in simulated camera: :func:`raingauge.render.simulator.simulate` at a fixed rate.
+
+    Parameters
+    ----------
+    rain_rate_mm_h : [mm/h] rain rate of the simulated rain
+    profile : the camera profile rendered (its size may be reduced by ``size``)
+    realtime : pace at the profile's frame rate (True) or as fast as possible
+    chunk_s : [s] seconds of rain rendered per call of the simulator
+    seed : random seed of the first chunk (the next chunks use seed + 1, ...)
+    limit_frames : stop after this many frames (None: for ever)
+    """
+
+    def __init__(self, rain_rate_mm_h: float, profile, *, realtime: bool = True, chunk_s: float = 10.0,
+                 seed: int = 0, limit_frames: int | None = None):
+        if not (rain_rate_mm_h >= 0 and np.isfinite(rain_rate_mm_h)):
+            raise InputError(f"simulate:{rain_rate_mm_h}: the rain rate must be >= 0 mm/h. Fix: e.g. simulate:10")
+        self.rain_rate_mm_h = float(rain_rate_mm_h)
+        self.profile = profile
+        self.name = f"simulated camera at {rain_rate_mm_h:g} mm/h"
+        self.frame_rate_hz = profile.frame_rate_hz
+        self.realtime = realtime
+        self.chunk_s = chunk_s
+        self.seed = seed
+        self.limit_frames = limit_frames
+        self._gen: Iterator | None = None
+        self._count = 0
+
+    def _frames(self) -> Iterator[np.ndarray]:
+        from raingauge.render.simulator import simulate
+
+        k = 0
+        while True:
+            sim = simulate(self.profile, seconds=self.chunk_s, rain_rate_mm_h=self.rain_rate_mm_h,
+                           seed=self.seed + k)
+            for item in sim:
+                frame = item[0] if isinstance(item, tuple) else item
+                yield frame
+            k += 1
+
+    def open(self) -> None:
+        self._gen = self._frames()
+        self._count = 0
+
+    def read(self) -> np.ndarray | None:
+        if self._gen is None:
+            raise SourceError(f"{self.name}: not open")
+        if self.limit_frames is not None and self._count >= self.limit_frames:
+            return None
+        self._count += 1
+        return next(self._gen)
+
+
+def scaled_profile(profile, width_px: int, height_px: int):
+    """The profile of the same camera at another resolution (field of view kept).
+
+    The focal length [px] scales with the width and the pixel pitch [m]
+    inversely, so the optics in metres stay the same; used for small
+    simulated frames (``[source] size``).
+    """
+    scale = width_px / profile.width_px
+    changes = {"width_px": int(width_px), "height_px": int(height_px),
+               "focal_length_px": profile.focal_length_px * scale, "principal_point_px": None}
+    if profile.pixel_pitch_m is not None:
+        changes["pixel_pitch_m"] = profile.pixel_pitch_m / scale
+    return profile.replace(**changes)
+
+
+def open_source(spec: str, *, profile, realtime: bool = True, seed: int = 0) -> FrameSource:
+    """A :class:`FrameSource` for a specification (see the module docstring)."""
+    spec = str(spec).strip()
+    if spec.startswith("simulate:") or spec == "simulate":
+        text = spec.partition(":")[2] or "10"
+        try:
+            rate = float(text)
+        except ValueError:
+            raise InputError(f"source {spec!r}: the rain rate {text!r} is not a number. Fix: e.g. simulate:10") from None
+        return SimulatedSource(rate, profile, realtime=realtime, seed=seed)
+    if spec.isdigit():
+        return CameraSource(int(spec), frame_rate_hz=profile.frame_rate_hz)
+    if spec.lower().startswith(_STREAM_PREFIXES):
+        return CameraSource(spec, frame_rate_hz=profile.frame_rate_hz)
+    path = Path(spec).expanduser()
+    if path.exists():
+        return FileSource(path, frame_rate_hz=profile.frame_rate_hz, realtime=realtime)
+    raise InputError(
+        f"source {spec!r}: no such file or folder, and not a camera index or URL. Fix: use simulate:RATE, "
+        "a device index such as 0, an rtsp:// or http:// URL, a video file or a folder of images"
+    )
+
+
+class Grabber:
+    """Read a source on its own thread; reconnect, skip corrupt frames, time-stamp.
+
+    Frames come out of :meth:`get` as ``(t_s, frame)`` with ``t_s`` [s] since
+    :meth:`start`: the frame index over the frame rate for recorded and
+    simulated sources, the monotonic clock for live ones.
+
+    Attributes
+    ----------
+    connected : the source is delivering
+    corrupt_frames : frames skipped as unreadable or of the wrong size
+    reconnects : successful reconnections after a loss
+    finished : a recorded source reached its end
+    """
+
+    def __init__(self, source: FrameSource, *, shape: tuple[int, int] | None = None,
+                 backoff_s: tuple[float, float] = (0.5, 60.0), queue_size: int = 8):
+        self.source = source
+        self.shape = shape
+        self.backoff_s = backoff_s
+        self.queue: queue.Queue = queue.Queue(maxsize=queue_size)
+        self.connected = False
+        self.corrupt_frames = 0
+        self.reconnects = 0
+        self.dropped_frames = 0
+        self.finished = threading.Event()
+        self.error: BaseException | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="grabber", daemon=True)
+        self._t0 = 0.0
+        self._warned_shape = False
+
+    def start(self) -> "Grabber":
+        self._t0 = time.monotonic()
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+        try:
+            self.source.close()
+        except Exception:  # noqa: BLE001
+            log.exception("closing %s", self.source.name)
+
+    def get(self, timeout: float) -> tuple[float, np.ndarray] | None:
+        """Next ``(t_s, frame)``, or None when none came within ``timeout`` [s]."""
+        try:
+            return self.queue.get(timeout=timeout)
+        except queue.Empty:
+            return None
+
+    def now_s(self) -> float:
+        """Seconds since start on the grabber's clock."""
+        return time.monotonic() - self._t0
+
+    def _check(self, frame) -> np.ndarray | None:
+        if frame is None or not isinstance(frame, np.ndarray) or frame.size == 0:
+            return None
+        frame = to_gray(frame)
+        if frame.ndim != 2 or frame.dtype != np.uint8:
+            return None
+        if self.shape is not None and frame.shape != tuple(self.shape):
+            if not self._warned_shape:
+                log.error("%s delivers %dx%d frames but the camera profile says %dx%d; frames skipped. "
+                          "Fix: set width_px/height_px of the profile to the camera's resolution",
+                          self.source.name, frame.shape[1], frame.shape[0], self.shape[1], self.shape[0])
+                self._warned_shape = True
+            return None
+        return frame
+
+    def _put(self, item) -> None:
+        if self.source.live:
+            while True:
+                try:
+                    self.queue.put_nowait(item)
+                    return
+                except queue.Full:
+                    try:
+                        self.queue.get_nowait()
+                        self.dropped_frames += 1
+                    except queue.Empty:
+                        pass
+        while not self._stop.is_set():
+            try:
+                self.queue.put(item, timeout=0.2)
+                return
+            except queue.Full:
+                continue
+
+    def _run(self) -> None:
+        src = self.source
+        delay = self.backoff_s[0]
+        index = 0
+        ever_connected = False
+        while not self._stop.is_set():
+            if not self.connected:
+                try:
+                    src.open()
+                except (SourceError, InputError, OSError) as exc:
+                    if not src.live:
+                        self.error = exc
+                        self.finished.set()
+                        return
+                    log.warning("%s: %s; retrying in %.1f s", src.name, exc, delay)
+                    self._stop.wait(delay)
+                    delay = min(delay * 2, self.backoff_s[1])
+                    continue
+                except Exception as exc:  # noqa: BLE001 - e.g. the simulator failing
+                    self.error = exc
+                    log.exception("%s cannot start", src.name)
+                    self.finished.set()
+                    return
+                if ever_connected:
+                    self.reconnects += 1
+                    log.info("%s reconnected", src.name)
+                ever_connected = True
+                self.connected = True
+                delay = self.backoff_s[0]
+            try:
+                frame = src.read()
+            except SourceError as exc:
+                log.warning("%s lost: %s", src.name, exc)
+                self.connected = False
+                try:
+                    src.close()
+                except Exception:  # noqa: BLE001
+                    pass
+                continue
+            except Exception as exc:  # noqa: BLE001 - a decoder error on one frame
+                self.corrupt_frames += 1
+                log.debug("%s: corrupt frame (%s)", src.name, exc)
+                continue
+            if frame is None:
+                if src.live:
+                    self.connected = False
+                    continue
+                self.connected = False
+                self.finished.set()
+                return
+            # A recorded frame holds its time slot even when it is corrupt.
+            t = self.now_s() if src.live else (index + self.source_corrupt_frames) / src.frame_rate_hz
+            index += 1
+            checked = self._check(frame)
+            if checked is None:
+                self.corrupt_frames += 1
+                continue
+            if not src.live and src.realtime:
+                wait = self._t0 + t - time.monotonic()
+                if wait > 0:
+                    self._stop.wait(wait)
+            self._put((t, checked))
+        self.connected = False
+
+    @property
+    def source_corrupt_frames(self) -> int:
+        """Corrupt frames the source itself skipped (unreadable images in a folder)."""
+        return int(getattr(self.source, "corrupt_frames", 0) or 0)

@@ -1,0 +1,275 @@
+"""Global camera-motion compensation before the three-frame test.
+
+Eq. (19) [GargNayar2007] assumes a background that is stationary over frames
+n-1, n, n+1 (note 12).  A slowly panning camera or a mast shaking in the wind
+breaks that assumption everywhere at once; estimating the global image motion
+between frames and warping the neighbours into frame n restores it.  This goes
+beyond the paper, which assumes a static background.
+
+Transforms are 3x3 homogeneous matrices ``M`` that map pixel coordinates
+(x right, y down) of the *reference* frame to those of the *moving* frame, so
+that ``aligned(x) = moving(M x)`` (OpenCV's ``WARP_INVERSE_MAP`` convention).
+
+Motion models form a registry, :data:`MOTION_MODELS`:
+
+``none``         the camera is static.
+``translation``  phase correlation [Kuglin1975] on a reduced image: pans, tilts, jitter.
+``euclidean``    ECC maximisation [Evangelidis2008] (rotation + translation), seeded by
+                 phase correlation and kept only when it aligns better: a mast
+                 that shakes and twists.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = [
+    "MOTION_MODELS",
+    "estimate_motion",
+    "warp_to",
+    "MotionTracker",
+    "transform_magnitude_px",
+]
+
+MOTION_MODELS = ("none", "translation", "euclidean")
+
+
+def _check_model(model: str) -> str:
+    if model not in MOTION_MODELS:
+        raise ValueError(f"unknown motion model {model!r}; valid models: {', '.join(MOTION_MODELS)}")
+    return model
+
+
+def _reduce(frame: np.ndarray, width: int) -> tuple[np.ndarray, float]:
+    """Central crop, at full resolution, at most ``width`` x ``3/4 width`` [px].
+
+    Returns the crop and 1.0 (the scale of its pixels); cropping instead of
+    down-sampling keeps the sub-pixel accuracy that the three-frame test needs.
+    """
+    import cv2
+
+    frame = np.asarray(frame)
+    if frame.ndim == 3:
+        frame = cv2.cvtColor(frame.astype(np.float32, copy=False), cv2.COLOR_BGR2GRAY)
+    frame = frame.astype(np.float32, copy=False)
+    h, w = frame.shape
+    cw = min(w, int(width))
+    ch = min(h, int(width * 3 // 4))
+    x0 = (w - cw) // 2
+    y0 = (h - ch) // 2
+    # a copy: cv2.phaseCorrelate may write into its inputs
+    return np.array(frame[y0:y0 + ch, x0:x0 + cw], dtype=np.float32, copy=True), 1.0
+
+
+def _phase_translation(ref_small: np.ndarray, mov_small: np.ndarray, window: np.ndarray,
+                       min_response: float, refine: int = 1) -> tuple[float, float, float]:
+    """Phase correlation, then ``refine`` rounds on the residual after warping.
+
+    The sub-pixel peak of a single phase correlation is biased by a few tenths
+    of a pixel on smooth scenes; one more round on the re-aligned crop brings
+    the error to a few hundredths.
+    """
+    import cv2
+
+    (dx, dy), response = cv2.phaseCorrelate(ref_small, mov_small, window)
+    if not (math.isfinite(dx) and math.isfinite(dy)) or response < min_response:
+        return 0.0, 0.0, float(response)
+    h, w = ref_small.shape
+    for _ in range(refine):
+        M = np.array([[1.0, 0.0, dx], [0.0, 1.0, dy]])
+        al = cv2.warpAffine(mov_small, M, (w, h), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP,
+                            borderMode=cv2.BORDER_REPLICATE)
+        (rx, ry), _ = cv2.phaseCorrelate(ref_small, al, window)
+        if not (math.isfinite(rx) and math.isfinite(ry)) or abs(rx) > 2 or abs(ry) > 2:
+            break
+        dx, dy = dx + rx, dy + ry
+    return float(dx), float(dy), float(response)
+
+
+def estimate_motion(ref: np.ndarray, moving: np.ndarray, *, model: str = "translation",
+                    work_width: int = 256, min_response: float = 0.05) -> np.ndarray:
+    """Global motion from ``ref`` to ``moving``, a 3x3 matrix [px].
+
+    Parameters
+    ----------
+    ref, moving : (M, N) or (M, N, 3) arrays
+        Two frames of the same size [gray levels].
+    model : str
+        One of :data:`MOTION_MODELS`.
+    work_width : int
+        Width of the central crop used for estimation [px]; shifts up to
+        about a quarter of it are found.
+    min_response : float
+        Phase-correlation peaks weaker than this (flat or featureless scenes)
+        count as no motion.
+
+    Returns
+    -------
+    (3, 3) float64 array
+        ``M`` with ``aligned(x) = moving(M x)`` aligning ``moving`` onto ``ref``.
+    """
+    import cv2
+
+    _check_model(model)
+    ref = np.asarray(ref)
+    moving = np.asarray(moving)
+    if ref.shape[:2] != moving.shape[:2]:
+        raise ValueError(f"frames differ in size: {ref.shape} and {moving.shape}")
+    if model == "none":
+        return np.eye(3)
+    r, scale = _reduce(ref, work_width)
+    m, _ = _reduce(moving, work_width)
+    window = cv2.createHanningWindow(r.shape[::-1], cv2.CV_32F)
+    dx, dy, _resp = _phase_translation(r, m, window, min_response)
+    M = np.eye(3)
+    M[0, 2], M[1, 2] = dx * scale, dy * scale
+    if model == "translation":
+        return M
+    warp_mode = cv2.MOTION_EUCLIDEAN
+    W0 = np.array([[1, 0, dx], [0, 1, dy]], dtype=np.float32)
+    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 50, 1e-5)
+    try:
+        _, W = cv2.findTransformECC(r, m, W0.copy(), warp_mode, criteria, None, 1)
+    except cv2.error:
+        return M  # ECC did not converge: keep the phase-correlation shift
+    # Keep ECC only when it aligns the crops better than the pure translation.
+    h, w = r.shape
+    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+    inner = (slice(h // 8, h - h // 8), slice(w // 8, w - w // 8))
+    err_t = np.mean(np.abs(cv2.warpAffine(m, W0, (w, h), flags=flags) - r)[inner])
+    err_e = np.mean(np.abs(cv2.warpAffine(m, W, (w, h), flags=flags) - r)[inner])
+    if not err_e < err_t:
+        return M
+    # W maps crop coordinates of ref to those of moving; move to frame coordinates.
+    H, Wd = ref.shape[:2]
+    x0 = (Wd - w) // 2
+    y0 = (H - h) // 2
+    C = np.array([[1, 0, x0], [0, 1, y0], [0, 0, 1]], dtype=np.float64)
+    Wf = np.vstack([W.astype(np.float64), [0, 0, 1]])
+    return C @ Wf @ np.linalg.inv(C)
+
+
+def transform_magnitude_px(M: np.ndarray, shape: tuple[int, int]) -> float:
+    """Largest displacement [px] that ``M`` applies to the corners of a (rows, cols) frame."""
+    h, w = shape
+    corners = np.array([[0, 0, 1], [w - 1, 0, 1], [0, h - 1, 1], [w - 1, h - 1, 1]], dtype=np.float64).T
+    moved = M @ corners
+    moved = moved[:2] / moved[2]
+    return float(np.max(np.hypot(*(moved - corners[:2]))))
+
+
+def warp_to(frame: np.ndarray, M: np.ndarray, *, min_shift_px: float = 0.05,
+            with_valid: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+    """Warp ``frame`` into the reference frame: ``aligned(x) = frame(M x)``.
+
+    Parameters
+    ----------
+    frame : (M, N) or (M, N, C) array
+    M : (3, 3) array
+        Transform from :func:`estimate_motion` (or a composition of them).
+    min_shift_px : float
+        Below this displacement [px] the frame is returned unwarped (no
+        needless interpolation blur on a static camera).
+    with_valid : bool
+        Also return the (M, N) bool mask of pixels that fall inside ``frame``.
+
+    Returns
+    -------
+    aligned : array like ``frame`` (float32 when warped)
+    valid : (M, N) bool array or None (None means every pixel is valid)
+    """
+    import cv2
+
+    h, w = frame.shape[:2]
+    if transform_magnitude_px(M, (h, w)) < min_shift_px:
+        return frame, None
+    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+    src = frame if frame.dtype in (np.uint8, np.float32) else frame.astype(np.float32)
+    affine = np.allclose(M[2], [0, 0, 1])
+    if affine:
+        out = cv2.warpAffine(src, M[:2].astype(np.float64), (w, h), flags=flags,
+                             borderMode=cv2.BORDER_REPLICATE)
+    else:
+        out = cv2.warpPerspective(src, M, (w, h), flags=flags, borderMode=cv2.BORDER_REPLICATE)
+    valid = None
+    if with_valid:
+        if affine and np.allclose(M[:2, :2], np.eye(2)):
+            dx, dy = M[0, 2], M[1, 2]
+            valid = np.zeros((h, w), dtype=bool)
+            x0 = max(int(math.ceil(-dx)), 0)
+            x1 = min(int(math.floor(w - 1 - dx)), w - 1)
+            y0 = max(int(math.ceil(-dy)), 0)
+            y1 = min(int(math.floor(h - 1 - dy)), h - 1)
+            if x1 >= x0 and y1 >= y0:
+                valid[y0:y1 + 1, x0:x1 + 1] = True
+        else:
+            ones = np.ones((h, w), dtype=np.uint8)
+            if affine:
+                v = cv2.warpAffine(ones, M[:2], (w, h), flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
+                                   borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+            else:
+                v = cv2.warpPerspective(ones, M, (w, h), flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
+                                        borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+            valid = cv2.erode(v, np.ones((3, 3), np.uint8)).astype(bool)
+    return out, valid
+
+
+class MotionTracker:
+    """Chain frame-to-frame motion estimates through a stream.
+
+    ``add(frame)`` registers the next frame and returns its index; ``between(j, n)``
+    is the transform that warps frame j into frame n (``aligned(x) = I_j(M x)``).
+
+    Parameters
+    ----------
+    model : str
+        One of :data:`MOTION_MODELS`.
+    work_width : int
+        Width of the central crop used for estimation [px].
+    """
+
+    def __init__(self, *, model: str = "translation", work_width: int = 256, min_response: float = 0.05):
+        self.model = _check_model(model)
+        self.work_width = int(work_width)
+        self.min_response = float(min_response)
+        self._prev_small = None
+        self._prev_full = None
+        self._window = None
+        self._G: dict[int, np.ndarray] = {}
+        self._count = 0
+
+    def add(self, frame: np.ndarray) -> int:
+        """Register the next frame (gray or BGR); returns its index."""
+        import cv2
+
+        k = self._count
+        self._count += 1
+        if self.model == "none":
+            self._G[k] = np.eye(3)
+            return k
+        small, _ = _reduce(frame, self.work_width)
+        if self._prev_small is None or self._prev_small.shape != small.shape:
+            self._G[k] = np.eye(3)
+            self._window = cv2.createHanningWindow(small.shape[::-1], cv2.CV_32F)
+        elif self.model == "translation":
+            dx, dy, _ = _phase_translation(self._prev_small, small, self._window, self.min_response)
+            # Maps frame k coordinates to frame k-1 coordinates.
+            P = np.array([[1, 0, -dx], [0, 1, -dy], [0, 0, 1]], dtype=np.float64)
+            self._G[k] = self._G[k - 1] @ P
+        else:
+            M = estimate_motion(self._prev_full, frame, model=self.model, work_width=self.work_width,
+                                min_response=self.min_response)
+            self._G[k] = self._G[k - 1] @ np.linalg.inv(M)
+        self._prev_small = small
+        if self.model not in ("none", "translation"):
+            self._prev_full = np.asarray(frame)
+        old = k - 64   # keep memory bounded
+        if old in self._G:
+            del self._G[old]
+        return k
+
+    def between(self, j: int, n: int) -> np.ndarray:
+        """Transform warping frame j into frame n."""
+        return np.linalg.solve(self._G[j], self._G[n])

@@ -1,0 +1,344 @@
+"""Detection and removal of rain in a frame stream, Sec. 5 [GargNayar2007].
+
+``detect_streaks`` is the per-frame part the gauge runs on every frame:
+candidates (Eq. 19), streaks and the photometric test (Eq. 18).
+
+``Derainer`` is the whole algorithm on a stream: global motion compensation,
+detection, the dynamics of the binary field (R_b, needle map, segmentation)
+and removal (Sec. 5.2).  It takes frames one by one and returns each output
+frame a few frames later (the removal looks three frames ahead), one output
+for every input, the first and the last included.  A frame that repeats its
+predecessor (frame-rate conversion) cannot show a one-frame spike; repeats are
+set aside, the algorithm runs on the distinct frames, and a repeat gets the
+output of the frame it repeats.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Iterable, Iterator
+
+import numpy as np
+
+from raingauge.vision.candidates import candidates, luminance
+from raingauge.vision.dynamics import DynamicsField, RainDynamics
+from raingauge.vision.motion import MotionTracker, warp_to
+from raingauge.vision.photometric import StreakFits, beta_max_for_exposure, photometric_filter
+from raingauge.vision.removal import remove_rain
+
+__all__ = ["detect_streaks", "Derainer", "DerainedFrame", "derain_clip", "estimate_noise_sigma"]
+
+
+def detect_streaks(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, *, c: float = 3.0, beta_max: float,
+                   noise_sigma: float = 1.0, min_pixels: int = 5, tol: float | None = None,
+                   valid: np.ndarray | None = None, max_relative_residual: float = 0.35,
+                   residual_sigmas: float = 3.0, slope_sigmas: float = 2.0) -> tuple[np.ndarray, StreakFits]:
+    """Rain streaks of frame n: Eq. (19) candidates, then the Eq. (18) test [GargNayar2007].
+
+    Parameters
+    ----------
+    prev, cur, nxt : (M, N) float arrays
+        Linearised luminance of frames n-1, n, n+1, aligned to frame n [gray levels].
+    c : float
+        Eq. (19) threshold [gray levels].
+    beta_max : float
+        Largest Eq. (18) slope, tau_max / T (``beta_max_for_exposure(profile.exposure_s)``).
+    noise_sigma : float
+        Camera noise [gray levels].
+    min_pixels, max_relative_residual, residual_sigmas, slope_sigmas
+        See :func:`raingauge.vision.photometric.fit_streaks`.
+    tol, valid
+        See :func:`raingauge.vision.candidates.candidates`.
+
+    Returns
+    -------
+    mask : (M, N) bool array
+        Pixels of the accepted streaks (the binary rain field b of frame n).
+    streaks : StreakFits
+        Every streak of at least ``min_pixels`` with its fit; ``streaks.accepted``
+        flags the rain streaks and ``streaks.accepted_only()`` lists them.
+    """
+    f32 = np.float32
+    prev = np.asarray(prev, dtype=f32)
+    cur = np.asarray(cur, dtype=f32)
+    nxt = np.asarray(nxt, dtype=f32)
+    cand = candidates(prev, cur, nxt, c=c, tol=tol, valid=valid)
+    return photometric_filter(prev, cur, nxt, cand, beta_max=beta_max, noise_sigma=noise_sigma,
+                              min_pixels=min_pixels, max_relative_residual=max_relative_residual,
+                              residual_sigmas=residual_sigmas, slope_sigmas=slope_sigmas)
+
+
+def estimate_noise_sigma(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray) -> float:
+    """Camera noise [gray levels] from three frames: robust spread of I_n - (I_{n-1} + I_{n+1}) / 2.
+
+    The median absolute deviation ignores the sparse rain and moving pixels;
+    the difference has variance 1.5 sigma^2 for independent noise.
+    """
+    d = np.asarray(cur, np.float32) - 0.5 * (np.asarray(prev, np.float32) + np.asarray(nxt, np.float32))
+    d = d[::2, ::2]
+    mad = float(np.median(np.abs(d - np.median(d))))
+    return max(1.4826 * mad / math.sqrt(1.5), 0.1)
+
+
+@dataclasses.dataclass
+class DerainedFrame:
+    """One output frame of :class:`Derainer`.
+
+    Attributes
+    ----------
+    index : int
+        Position of the frame in the input stream (0-based).
+    frame : uint8 array
+        The derained frame, same shape as the input frame.
+    rain : (M, N) bool
+        Pixels replaced (rain detected inside a rain region).
+    detected : (M, N) bool
+        The binary rain field b of the frame (accepted streaks, before segmentation).
+    region : (M, N) bool
+        The rain region used.
+    field : DynamicsField or None
+        The correlation field (needle map) used.
+    repeat : bool
+        The input frame repeated its predecessor.
+    """
+
+    index: int
+    frame: np.ndarray
+    rain: np.ndarray
+    detected: np.ndarray
+    region: np.ndarray
+    field: DynamicsField | None
+    repeat: bool = False
+
+
+@dataclasses.dataclass
+class _Unique:
+    k: int
+    raw: np.ndarray          # input frame, uint8
+    lin: np.ndarray          # linearised, float32 (M, N) or (M, N, 3)
+    lum: np.ndarray          # luminance, float32 (M, N)
+    inputs: list             # input indices showing this frame
+    b: np.ndarray | None = None
+    streaks: StreakFits | None = None
+
+
+class Derainer:
+    """Streaming rain detection and removal, Sec. 5 [GargNayar2007].
+
+    Parameters
+    ----------
+    profile : CameraProfile, optional
+        Camera: linearisation, exposure (for beta_max), noise and threshold c.
+        Default: a linear camera with the paper's 30 ms exposure and the noise
+        estimated from the video.
+    c : float, optional
+        Eq. (19) threshold [gray levels]; default the profile's
+        ``detection_threshold_dn`` (3).
+    l, f : int
+        Correlation neighbourhood [px] and window [frames] (11 and 30).
+    motion : str
+        Global motion model (see :data:`raingauge.vision.motion.MOTION_MODELS`).
+    beta_max : float, optional
+        Override tau_max / T.
+    noise_sigma : float or "auto", optional
+        Camera noise [gray levels]; "auto" estimates it from the first frames.
+    min_pixels : int
+        Smallest streak [px].
+    grow_px : int
+        Also clean the faint rim of detected streaks (see :func:`remove_rain`).
+    runs : bool
+        Remove drops that hit a pixel in 2 or 3 consecutive frames.
+    repeat_tol : float
+        Frames whose mean absolute luminance difference to the previous one is
+        below this are repeats [gray levels].
+    dynamics : dict, optional
+        Extra arguments of :class:`RainDynamics` (cell, smooth, min_ratio, ...).
+    """
+
+    LOOKAHEAD = 3
+
+    def __init__(self, profile=None, *, c: float | None = None, l: int = 11, f: int = 30,
+                 motion: str = "translation", beta_max: float | None = None,
+                 noise_sigma: float | str | None = None, min_pixels: int = 5, grow_px: int = 1,
+                 runs: bool = True, repeat_tol: float = 0.1, tol: float | None = None,
+                 dynamics: dict | None = None):
+        self.profile = profile
+        if c is None:
+            c = profile.detection_threshold_dn if profile is not None else 3.0
+        if not (math.isfinite(c) and c > 0):
+            raise ValueError(f"threshold c must be a positive number of gray levels, got {c!r}")
+        self.c = float(c)
+        if beta_max is None:
+            beta_max = beta_max_for_exposure(profile.exposure_s if profile is not None else 1.0 / 30.0)
+        self.beta_max = float(beta_max)
+        if noise_sigma is None:
+            noise_sigma = profile.noise_sigma_dn if profile is not None else "auto"
+        self._noise_auto = noise_sigma == "auto"
+        self.noise_sigma = 1.0 if self._noise_auto else float(noise_sigma)
+        self.l, self.f = int(l), int(f)
+        self.min_pixels = int(min_pixels)
+        self.grow_px = int(grow_px)
+        self.runs = bool(runs)
+        self.repeat_tol = float(repeat_tol)
+        self.tol = tol
+        self._dyn_kw = dict(dynamics or {})
+        self._tracker = MotionTracker(model=motion)
+        self._dyn: RainDynamics | None = None
+        self._units: dict[int, _Unique] = {}
+        self._n_units = 0
+        self._n_inputs = 0
+        self._next_remove = 0
+        self._shape = None
+        self._field: DynamicsField | None = None
+        self.streak_log: list[tuple[int, int]] = []   # (frame index, accepted streaks)
+
+    # ----------------------------------------------------------------- helpers
+    def _linearize(self, frame: np.ndarray) -> np.ndarray:
+        if self.profile is not None:
+            return self.profile.linearize(frame)
+        return np.asarray(frame, dtype=np.float32)
+
+    def _to_uint8(self, lin: np.ndarray) -> np.ndarray:
+        if self.profile is not None:
+            return self.profile.delinearize(lin)
+        return np.clip(np.rint(lin), 0, 255).astype(np.uint8)
+
+    def _aligned(self, j: int, n: int, what: str):
+        u = self._units[j]
+        arr = getattr(u, what)
+        if j == n:
+            return arr, None
+        return warp_to(arr, self._tracker.between(j, n))
+
+    def _reflect(self, i: int, last: int) -> int:
+        """Reflect an index into [0, last] (reflect-101)."""
+        if last <= 0:
+            return 0
+        period = 2 * last
+        i = abs(i) % period
+        return period - i if i > last else i
+
+    # ----------------------------------------------------------------- stream
+    def push(self, frame: np.ndarray) -> list[DerainedFrame]:
+        """Add the next input frame; returns the output frames that became final (in order)."""
+        frame = np.asarray(frame)
+        if frame.dtype != np.uint8:
+            raise ValueError(f"frames must be uint8, got {frame.dtype}")
+        if self._shape is None:
+            self._shape = frame.shape
+            self._dyn = RainDynamics(frame.shape[:2], l=self.l, f=self.f, **self._dyn_kw)
+        elif frame.shape != self._shape:
+            raise ValueError(f"frame {self._n_inputs} has shape {frame.shape}, the stream started with {self._shape}")
+        idx = self._n_inputs
+        self._n_inputs += 1
+        lin = self._linearize(frame)
+        lum = luminance(lin)
+        if self._n_units:
+            last = self._units[self._n_units - 1]
+            if np.array_equal(frame, last.raw) or float(np.mean(np.abs(lum - last.lum))) < self.repeat_tol:
+                last.inputs.append(idx)
+                return []
+        k = self._n_units
+        self._n_units += 1
+        self._units[k] = _Unique(k=k, raw=frame, lin=lin, lum=lum, inputs=[idx])
+        self._tracker.add(lum)
+        if k == 2:
+            if self._noise_auto:
+                self.noise_sigma = estimate_noise_sigma(self._units[0].lum, self._units[1].lum, self._units[2].lum)
+            self._detect(0, 1, 2, boundary=True)   # first frame: both neighbours from the future
+        if k >= 2:
+            self._detect(k - 1, k - 2, k)
+        out = []
+        while self._next_remove + self.LOOKAHEAD <= k:
+            out.extend(self._finish(self._next_remove, last=None))
+            self._next_remove += 1
+        return out
+
+    def flush(self) -> list[DerainedFrame]:
+        """End of stream: finish every frame still held back."""
+        out: list[DerainedFrame] = []
+        n = self._n_units
+        if n == 0:
+            return out
+        if n >= 3 and self._units[n - 1].b is None:
+            self._detect(n - 1, n - 2, n - 3, boundary=True)   # last frame: both neighbours from the past
+        while self._next_remove < n:
+            out.extend(self._finish(self._next_remove, last=n - 1))
+            self._next_remove += 1
+        return out
+
+    def process(self, frames: Iterable[np.ndarray]) -> Iterator[DerainedFrame]:
+        """Derain a whole sequence lazily: one output per input, in order."""
+        for fr in frames:
+            yield from self.push(fr)
+        yield from self.flush()
+
+    # --------------------------------------------------------------- the work
+    def _detect(self, n: int, i: int, j: int, boundary: bool = False) -> None:
+        """Detect rain in unit n against units i and j.
+
+        At the two ends of the stream both neighbours lie on one side; such a
+        detection is weaker evidence and does not enter the dynamics.
+        """
+        prev, v1 = self._aligned(i, n, "lum")
+        nxt, v2 = self._aligned(j, n, "lum")
+        valid = v1 if v2 is None else (v2 if v1 is None else v1 & v2)
+        cur = self._units[n].lum
+        b, streaks = detect_streaks(prev, cur, nxt, c=self.c, beta_max=self.beta_max, noise_sigma=self.noise_sigma,
+                                    min_pixels=self.min_pixels, tol=self.tol, valid=valid)
+        u = self._units[n]
+        u.b = b
+        u.streaks = streaks
+        if not boundary:
+            self._dyn.update(b)
+            self._field = None
+
+    def _finish(self, n: int, last: int | None) -> list[DerainedFrame]:
+        u = self._units[n]
+        top = self._n_units - 1 if last is None else last
+        if self._field is None:
+            self._field = self._dyn.field()
+        field = self._field
+        region = field.region_mask(dilate_px=self.l // 2)
+        if u.b is None:  # fewer than 3 distinct frames: nothing can be detected
+            u.b = np.zeros(u.lum.shape, bool)
+        if top >= 2 and np.any(region):
+            ids = [self._reflect(n + o, top) for o in range(-3, 4)]
+            lins, lums = [], []
+            for j in ids:
+                a, _ = self._aligned(j, n, "lin")
+                y, _ = self._aligned(j, n, "lum")
+                lins.append(a)
+                lums.append(y)
+            derained, replaced = remove_rain(np.stack(lins), np.stack(lums), u.b, region, c=self.c,
+                                             runs=self.runs, tol=self.tol, grow_px=self.grow_px,
+                                             beta_max=self.beta_max, noise_sigma=self.noise_sigma,
+                                             min_pixels=self.min_pixels)
+            out_frame = u.raw.copy()
+            if np.any(replaced):
+                out_frame[replaced] = self._to_uint8(derained)[replaced]
+        else:
+            replaced = np.zeros(u.lum.shape, bool)
+            out_frame = u.raw.copy()
+        self.streak_log.append((u.inputs[0], int(u.streaks.accepted.sum()) if u.streaks is not None else 0))
+        results = [DerainedFrame(index=i, frame=out_frame, rain=replaced, detected=u.b, region=region,
+                                 field=field, repeat=(r > 0)) for r, i in enumerate(u.inputs)]
+        # drop what is no longer needed (frames n-3 and older)
+        old = n - self.LOOKAHEAD
+        if old in self._units:
+            del self._units[old]
+        return results
+
+
+def derain_clip(frames: np.ndarray | Iterable[np.ndarray], profile=None, **kwargs) -> tuple[np.ndarray, np.ndarray]:
+    """Derain a whole clip: (T, M, N[, 3]) uint8 -> (derained, rain masks (T, M, N) bool).
+
+    Keyword arguments go to :class:`Derainer`.
+    """
+    d = Derainer(profile, **kwargs)
+    outs, masks = [], []
+    for r in d.process(frames):
+        outs.append(r.frame)
+        masks.append(r.rain)
+    return np.stack(outs), np.stack(masks)

@@ -1,0 +1,391 @@
+"""The field instrument: configuration, sources, the loop, outputs off the loop, faults, SIGTERM."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from firmware_interface.fields import STATUS_BITS, decode_register, FIELD_BY_NAME
+from raingauge.errors import ConfigError, InputError, SourceError
+from raingauge.history import History
+from raingauge.instrument.config import DEFAULTS, config_from_dict, load_config
+from raingauge.instrument.loop import Accumulator, Diagnostics, Instrument
+from raingauge.instrument.sources import (
+    CameraSource, FileSource, FrameSource, Grabber, SimulatedSource, open_source,
+)
+from raingauge.profile import load_profile
+
+REPO = Path(__file__).resolve().parents[1]
+SHAPE = (24, 32)
+
+
+def small_profile(**kw):
+    return load_profile("gauge-default").replace(width_px=SHAPE[1], height_px=SHAPE[0], **kw)
+
+
+class StepGauge:
+    """Test double of raingauge.gauge.RainGauge (same constructor and methods): one record per
+    step whose rate is the mean gray level of the step's frames / 10 [mm/h]."""
+
+    def __init__(self, profile, *, window_s, step_s, velocity_model, clock_start_s):
+        self.window, self.step = window_s, step_s
+        self.next = clock_start_s + step_s
+        self.acc = 0.0
+        self.sum = 0.0
+        self.n = 0
+
+    def _record(self):
+        rate = self.sum / self.n / 10.0 if self.n else 0.0
+        self.acc += rate * self.step / 3600.0
+        rec = {"t_start_s": self.next - self.window, "t_end_s": self.next, "rain_rate_mm_h": rate,
+               "rain_rate_ci95_mm_h": [0.8 * rate, 1.2 * rate], "accumulation_mm": self.acc,
+               "drops_counted": self.n, "drops_rejected_defocus": 0, "dsd_d_mm": [0.1 * k for k in range(32)],
+               "dsd_n_m3_mm": [float(k) for k in range(32)], "nt_m3": 1.0, "dm_mm": 1.0, "z_dbz": 20.0,
+               "intensity_class": "moderate", "synop_4680": 62, "quality": []}
+        self.sum, self.n = 0.0, 0
+        return rec
+
+    def process(self, frame, t_s=None):
+        out = []
+        while t_s >= self.next:
+            out.append(self._record())
+            self.next += self.step
+        self.sum += float(np.mean(frame))
+        self.n += 1
+        return out
+
+    def flush(self):
+        return [self._record()] if self.n else []
+
+
+class ListSource(FrameSource):
+    """A recorded source of constant frames."""
+
+    def __init__(self, n, value=50, fps=10.0, shape=SHAPE, bad_every=0):
+        self.n, self.value, self.frame_rate_hz, self.shape, self.bad_every = n, value, fps, shape, bad_every
+        self.name = "list"
+        self.i = 0
+
+    def read(self):
+        if self.i >= self.n:
+            return None
+        self.i += 1
+        if self.bad_every and self.i % self.bad_every == 0:
+            return np.zeros((5, 5), np.uint8)       # wrong size: corrupt
+        return np.full(self.shape, self.value, np.uint8)
+
+
+class FlakyCamera(FrameSource):
+    """A live camera that vanishes after some frames and comes back after an outage."""
+
+    live = True
+
+    def __init__(self, *, fps=50.0, frames_before_loss=40, outage_s=1.5, value=100):
+        self.frame_rate_hz, self.frames_before_loss, self.outage_s, self.value = fps, frames_before_loss, outage_s, value
+        self.name = "flaky camera"
+        self.count = 0
+        self.back_at = 0.0
+        self.lost_once = False
+        self.open_failures = 0
+
+    def open(self):
+        if time.monotonic() < self.back_at:
+            self.open_failures += 1
+            raise SourceError("no such device")
+
+    def read(self):
+        time.sleep(1.0 / self.frame_rate_hz)
+        self.count += 1
+        if self.count == self.frames_before_loss and not self.lost_once:
+            self.lost_once = True
+            self.back_at = time.monotonic() + self.outage_s
+            raise SourceError("device unplugged")
+        return np.full(SHAPE, self.value, np.uint8)
+
+
+# ---------------------------------------------------------------------- configuration
+def test_default_config_is_the_embedded_simulation():
+    cfg = load_config(None)
+    assert cfg.source["uri"] == "simulate:10"
+    assert cfg.modbus["tcp"] == "127.0.0.1:5020" and cfg.camera["profile"] == "gauge-default"
+    assert cfg.history["path"] == "raingauge.sqlite"
+
+
+def test_example_config_in_deploy_is_valid():
+    cfg = load_config(REPO / "deploy" / "raingauge.toml")
+    assert set(cfg.as_dict()) == set(DEFAULTS)
+
+
+@pytest.mark.parametrize("doc,match", [
+    ({"modbus": {"tpc": "x"}}, r"\[modbus\]\.tpc: unknown key; valid keys of \[modbus\]: tcp"),
+    ({"modbuss": {}}, r"unknown section \[modbuss\]"),
+    ({"gauge": {"window_s": 45, "step_s": 10}}, r"\[gauge\]\.window_s: .*not a whole multiple.*Fix: window_s ="),
+    ({"modbus": {"unit_id": 300}}, r"\[modbus\]\.unit_id: must be 1-247.*Fix: unit_id = 1"),
+    ({"modbus": {"tcp": "host:99999"}}, r"\[modbus\]\.tcp"),
+    ({"source": {"realtime": "yes"}}, r"\[source\]\.realtime: expected true or false"),
+    ({"history": {"retention_days": -1}}, r"\[history\]\.retention_days: must be >= 0"),
+    ({"diagnostics": {"frames": 2}}, r"\[diagnostics\]\.frames: needs at least 3"),
+])
+def test_config_errors_name_key_and_fix(doc, match):
+    with pytest.raises(ConfigError, match=match):
+        config_from_dict(doc, source="test.toml")
+
+
+def test_config_file_errors(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[source\nuri = 1")
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        load_config(bad)
+    with pytest.raises(ConfigError, match="does not exist"):
+        load_config(tmp_path / "none.toml")
+
+
+# ---------------------------------------------------------------------- sources
+def test_open_source_kinds(tmp_path):
+    prof = small_profile()
+    assert isinstance(open_source("simulate:2.5", profile=prof), SimulatedSource)
+    assert open_source("simulate:2.5", profile=prof).rain_rate_mm_h == 2.5
+    cam = open_source("0", profile=prof)
+    assert isinstance(cam, CameraSource) and cam.target == 0 and cam.live
+    assert open_source("rtsp://127.0.0.1:8554/cam", profile=prof).target == "rtsp://127.0.0.1:8554/cam"
+    (tmp_path / "frames").mkdir()
+    assert isinstance(open_source(str(tmp_path / "frames"), profile=prof), FileSource)
+    with pytest.raises(InputError, match="simulate:RATE"):
+        open_source(str(tmp_path / "nothing.mkv"), profile=prof)
+    with pytest.raises(InputError, match="simulate:10"):
+        open_source("simulate:lots", profile=prof)
+
+
+def test_image_folder_with_corrupt_frames_skips_and_counts(tmp_path):
+    import cv2
+
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for i in range(6):
+        cv2.imwrite(str(folder / f"{i:03d}.png"), np.full(SHAPE, 10 * i, np.uint8))
+    (folder / "003.png").write_bytes(b"\x89PNG garbage")                  # unreadable
+    cv2.imwrite(str(folder / "004.png"), np.zeros((8, 8), np.uint8))       # wrong size
+    g = Grabber(FileSource(folder), shape=SHAPE).start()
+    got = []
+    while not (g.finished.is_set() and g.queue.empty()):
+        item = g.get(0.2)
+        if item:
+            got.append(item)
+    g.stop()
+    assert [int(f[0, 0]) for _, f in got] == [0, 10, 20, 50]
+    assert g.corrupt_frames + g.source_corrupt_frames == 2
+    assert [t for t, _ in got] == pytest.approx([0, 1 / 30, 2 / 30, 5 / 30])  # frames keep their slots
+
+
+def test_grabber_reconnects_with_backoff():
+    cam = FlakyCamera(frames_before_loss=10, outage_s=0.6)
+    g = Grabber(cam, shape=SHAPE, backoff_s=(0.05, 0.2)).start()
+    n = 0
+    deadline = time.monotonic() + 10
+    while g.reconnects == 0 and time.monotonic() < deadline:
+        if g.get(0.1):
+            n += 1
+    while n < 15 and time.monotonic() < deadline:
+        if g.get(0.1):
+            n += 1
+    g.stop()
+    assert g.reconnects == 1 and cam.open_failures >= 2 and n >= 15
+
+
+# ---------------------------------------------------------------------- the loop
+def _instrument(source, tmp_path=None, **kw):
+    prof = small_profile()
+    hist = History(tmp_path / "h.sqlite") if tmp_path is not None else None
+    records = []
+    kw.setdefault("window_s", 1.0)
+    kw.setdefault("step_s", 0.5)
+    inst = Instrument(prof, Grabber(source, shape=SHAPE, backoff_s=(0.05, 0.2)), history=hist,
+                      gauge_factory=StepGauge, on_record=records.append, wall_t0=1.79e9, **kw)
+    return inst, records, hist
+
+
+def test_loop_records_every_step_with_all_fields(tmp_path):
+    inst, records, _ = _instrument(ListSource(50, value=50, fps=10.0, bad_every=10), tmp_path)
+    summary = inst.run()
+    # 50 frames over 5 s at 10 Hz, 5 corrupt: records at 0.5 s steps, the last one flushed
+    assert summary["corrupt_frames"] == 5 and summary["frames"] == 45
+    assert len(records) == 10
+    r = records[3]
+    assert r["rain_rate_mm_h"] == pytest.approx(5.0) and r["intensity_class"] == 2
+    assert r["time_unix"] == pytest.approx(1.79e9 + 2.0) and r["time_utc"].endswith("Z")
+    assert r["status"] & (1 << STATUS_BITS["camera_ok"]) and r["status"] & (1 << STATUS_BITS["rain_detected"])
+    assert not r["status"] & (1 << STATUS_BITS["calibrated"])          # shipped default profile
+    assert r["accumulation_mm"] == pytest.approx(4 * 5.0 * 0.5 / 3600)
+    assert r["exposure_s"] == 0.004 and r["window_s"] == 1.0
+    h = History(tmp_path / "h.sqlite", readonly=True)
+    rows = list(h.rows())
+    assert len(rows) == 10 and rows[3]["rain_rate_mm_h"] == pytest.approx(5.0)
+    assert h.settings()["accumulation_mm"] == pytest.approx(records[-1]["accumulation_mm"])
+    h.close()
+
+
+def test_camera_lost_gives_missing_records_not_zero_rain(tmp_path):
+    inst, records, _ = _instrument(FlakyCamera(frames_before_loss=40, outage_s=1.5), tmp_path,
+                                   stall_timeout_s=0.3)
+    import threading
+
+    threading.Timer(4.0, inst.stop).start()
+    summary = inst.run()
+    missing = [r for r in records if r["missing"]]
+    good = [r for r in records if not r["missing"]]
+    assert summary["reconnects"] == 1
+    assert len(missing) >= 2 and len(good) >= 3
+    for r in missing:
+        assert math.isnan(r["rain_rate_mm_h"]) and "camera_lost" in r["quality"]
+        assert not r["status"] & (1 << STATUS_BITS["camera_ok"])
+        assert r["status"] & (1 << STATUS_BITS["low_confidence"])
+    # no rain is added while the camera is gone
+    i = records.index(missing[0])
+    assert missing[-1]["accumulation_mm"] == records[i - 1]["accumulation_mm"]
+    # measurement resumed after the outage
+    assert any(not r["missing"] for r in records[records.index(missing[-1]) + 1:])
+    ends = [r["t_end_s"] for r in records]
+    assert ends == sorted(ends)
+    h = History(tmp_path / "h.sqlite", readonly=True)
+    stored = list(h.rows())
+    assert len(stored) == len(records)
+    assert sum(r["missing"] for r in stored) == len(missing) and all(r["rain_rate_mm_h"] is None for r in stored if r["missing"])
+    h.close()
+
+
+class StuckOutput:
+    """An output whose publish would block for ever if called on the loop (it must be queued)."""
+
+    def __init__(self):
+        from firmware_interface.serial_out import SerialWriter
+
+        self.master, self.slave = os.openpty()  # nobody reads the master: the port fills and stalls
+        self.writer = SerialWriter(os.ttyname(self.slave), 9600, queue_size=4, write_timeout_s=0.5,
+                                   backoff_s=(0.05, 0.1),
+                                   formatter=lambda rec: ["$" + "X" * 4000 + "\r\n"])
+
+    def publish(self, rec):
+        self.writer.publish(rec)
+
+    @property
+    def fault(self):
+        return self.writer.fault
+
+    def close(self):
+        self.writer.close(timeout_s=0.2)
+        os.close(self.master)
+        os.close(self.slave)
+
+
+def test_a_stuck_serial_port_never_stalls_measurement():
+    stuck = StuckOutput()
+    inst, records, _ = _instrument(ListSource(200, fps=100.0), None, outputs=[stuck], window_s=0.2, step_s=0.1)
+    t0 = time.monotonic()
+    summary = inst.run()
+    elapsed = time.monotonic() - t0
+    assert summary["frames"] == 200 and len(records) == 20
+    assert stuck.writer.dropped > 0 or stuck.writer.errors > 0
+    assert records[-1]["status"] & (1 << STATUS_BITS["output_fault"])
+    assert elapsed < 10.0  # the loop ran at source speed, not at the port's (would be 20 x 0.5 s timeouts)
+
+
+def test_full_disk_raises_storage_fault_and_loses_nothing(tmp_path):
+    from firmware_interface.modbus import ModbusOutput
+    from pyModbusTCP.client import ModbusClient
+
+    modbus = ModbusOutput(tcp=("127.0.0.1", 0), window_s=1, step_s=0.5).start()
+    inst, records, hist = _instrument(ListSource(200, fps=20.0), tmp_path, outputs=[modbus], modbus=modbus)
+    hist.append({"time_unix": 0.0, "quality": []})   # a row from before
+    pages = hist.db.execute("PRAGMA page_count").fetchone()[0]
+    hist.db.execute(f"PRAGMA max_page_count={pages}")  # the disk is full
+    inst.history_writer.retry_s = 0.2
+    source = inst.grabber.source
+    import threading
+
+    statuses = []
+
+    def poll():
+        c = ModbusClient(host="127.0.0.1", port=modbus.tcp_port, unit_id=1, timeout=1)
+        while not inst._stop.is_set():
+            regs = c.read_input_registers(1, 1)
+            if regs:
+                statuses.append(regs[0])
+            time.sleep(0.05)
+
+    def free_space():
+        deadline = time.monotonic() + 10
+        while not inst.history_writer.fault and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(1.5)
+        hist.db.execute("PRAGMA max_page_count=1073741823")
+
+    source.realtime = True
+    threading.Thread(target=poll, daemon=True).start()
+    threading.Thread(target=free_space, daemon=True).start()
+    summary = inst.run()
+    inst._stop.set()
+    assert summary["frames"] == 200                 # measurement went on
+    assert any(s & (1 << STATUS_BITS["storage_fault"]) for s in statuses)
+    assert any(r["status"] & (1 << STATUS_BITS["storage_fault"]) for r in records)
+    h = History(tmp_path / "h.sqlite", readonly=True)
+    assert h.count() == len(records) + 1 and h.integrity_ok()
+    h.close()
+
+
+def test_modbus_reset_resets_the_instrument_accumulation(tmp_path):
+    from firmware_interface.fields import RESET_MAGIC
+    from firmware_interface.modbus import ModbusOutput
+    from pyModbusTCP.client import ModbusClient
+
+    holder = {}
+    modbus = ModbusOutput(tcp=("127.0.0.1", 0), window_s=1, step_s=0.5,
+                          on_reset=lambda: holder["inst"].reset_accumulation())
+    modbus.start()
+    src = ListSource(100, value=200, fps=20.0)
+    src.realtime = True
+    inst, records, _ = _instrument(src, tmp_path, outputs=[modbus], modbus=modbus,
+                                   accumulator=Accumulator(5.0, 100.0))
+    holder["inst"] = inst
+    import threading
+
+    def reset_later():
+        time.sleep(2.5)
+        ModbusClient(host="127.0.0.1", port=modbus.tcp_port, unit_id=1, timeout=1).write_single_register(0, RESET_MAGIC)
+
+    threading.Thread(target=reset_later, daemon=True).start()
+    inst.run()
+    accs = [r["accumulation_mm"] for r in records]
+    assert accs[0] > 5.0                                  # resumed from the stored 5 mm
+    drop = [i for i in range(1, len(accs)) if accs[i] < accs[i - 1]]
+    assert len(drop) == 1 and accs[drop[0]] < 0.1         # one reset, from zero again
+
+
+def test_diagnostics_write_snapshot_and_survive_failures(tmp_path, caplog):
+    prof = small_profile()
+    diag = Diagnostics(tmp_path / "diag", prof, keep=2)
+    rng = np.random.default_rng(0)
+    frames = [rng.integers(40, 60, SHAPE, dtype=np.uint8) for _ in range(8)]
+    out = diag.snapshot(frames, 1.79e9, 4.0, 60.0)
+    assert sorted(p.name for p in out.iterdir()) == ["advice.json", "derained.png", "frame.png", "needles.png"]
+    advice = json.loads((out / "advice.json").read_text())
+    assert advice["rain_rate_mm_h"] == 4.0 and advice["advice"]["goal"] == "gauge"
+    assert advice["current"]["exposure_s"] == prof.exposure_s
+    # a profile the advisor cannot use: logged, the rest still written, nothing raised
+    bad = Diagnostics(tmp_path / "diag2", None)
+    out2 = bad.snapshot(frames, 1.79e9 + 10, 4.0, 60.0)
+    assert (out2 / "frame.png").is_file() and bad.failures["advisor"] == 1
+    assert "the gauge is not affected" in caplog.text
+    for k in range(3):
+        diag.snapshot(frames, 1.79e9 + 100 * (k + 1), 4.0, 60.0)
+    assert len([p for p in (tmp_path / "diag").iterdir()]) == 2
+    diag.close()
+    bad.close()
