@@ -60,7 +60,7 @@ DROP_DN = 255.0
 
 def capsule_sigma(*, contrast, density_m3, radius_m, velocity_m_s, exposure_s, f_number, focus_distance_m,
                   focal_length_px, pixel_pitch_m, z_near_m, z_far_m, n=4000):
-    """sigma_r of the capsule model (module docstring), and its variance-weighted mean d/L and d [px]."""
+    """sigma_r of the capsule model (module docstring), its variance-weighted mean d/L and median d [px]."""
     from scipy.integrate import simpson
 
     from raingauge.physics import camera
@@ -80,7 +80,8 @@ def capsule_sigma(*, contrast, density_m3, radius_m, velocity_m_s, exposure_s, f
     integrand = (z / f) ** 2 * math.pi**2 * a_i**4 / area * (1.0 - 1.0 / (3.0 * d))
     var = contrast**2 * density_m3 * simpson(integrand, x=z)
     weight = integrand / np.sum(integrand)
-    return math.sqrt(var), float(np.sum(weight * d / length)), float(np.sum(weight * d))
+    d_median = float(d[np.searchsorted(np.cumsum(weight), 0.5)])
+    return math.sqrt(var), float(np.sum(weight * d / length)), d_median
 
 
 def measure(profile, *, dsd, depth_range_m, n_frames, seed, var_noise):

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Iterable
 
 import numpy as np
 
@@ -107,23 +108,43 @@ def scene_motion(frames: np.ndarray, *, noise_sigma_dn: float) -> tuple[float, f
     changed : float
         Mean fraction of pixels with |I_{n+1} - I_{n-1}| > 4 sqrt(2) sigma [-].
     """
-    import cv2
+    meter = _MotionMeter(noise_sigma_dn)
+    for frame in np.asarray(frames, dtype=np.float32):
+        meter.add(frame)
+    return meter.result()
 
-    frames = np.asarray(frames, dtype=np.float32)
-    t, m, n = frames.shape
-    window = cv2.createHanningWindow((n, m), cv2.CV_32F)
-    limit = 4.0 * math.sqrt(2.0) * max(noise_sigma_dn, 0.5)
-    changed = [float(np.mean(np.abs(frames[i + 1] - frames[i - 1]) > limit)) for i in range(1, t - 1)]
-    shifts = []
-    for i in range(t - 1):
-        # phaseCorrelate may apply the window in place: give it copies.
-        (dx, dy), _resp = cv2.phaseCorrelate(frames[i].copy(), frames[i + 1].copy(), window)
-        shifts.append(math.hypot(dx, dy))
-    return float(np.median(shifts)), float(np.mean(changed))
+
+class _MotionMeter:
+    """Accumulates the global shift and the non-stationary fraction frame by frame."""
+
+    def __init__(self, noise_sigma_dn: float):
+        self.limit = np.float32(4.0 * math.sqrt(2.0) * max(noise_sigma_dn, 0.5))
+        self.window = None
+        self.prev: list[np.ndarray] = []
+        self.shifts: list[float] = []
+        self.changed: list[float] = []
+
+    def add(self, frame: np.ndarray) -> None:
+        import cv2
+
+        if self.window is None:
+            m, n = frame.shape
+            self.window = cv2.createHanningWindow((n, m), cv2.CV_32F)
+        if self.prev:
+            # phaseCorrelate may apply the window in place: give it copies.
+            (dx, dy), _resp = cv2.phaseCorrelate(self.prev[-1].copy(), frame.copy(), self.window)
+            self.shifts.append(math.hypot(dx, dy))
+        if len(self.prev) == 2:
+            self.changed.append(float(np.mean(np.abs(frame - self.prev[0]) > self.limit)))
+        self.prev = (self.prev + [frame])[-2:]
+
+    def result(self) -> tuple[float, float]:
+        return (float(np.median(self.shifts)) if self.shifts else 0.0,
+                float(np.mean(self.changed)) if self.changed else 0.0)
 
 
 def dry_run(
-    frames: np.ndarray,
+    frames: Iterable[np.ndarray],
     *,
     frame_rate_hz: float,
     exposure_s: float,
@@ -135,8 +156,9 @@ def dry_run(
 
     Parameters
     ----------
-    frames : (T, M, N) uint8 (or float, already linear)
-        Rain-free frames from the installed camera.
+    frames : (T, M, N) array or iterable of (M, N) arrays
+        Rain-free frames from the installed camera, uint8 codes (or floats
+        already linear) [gray levels]; read one at a time.
     frame_rate_hz : float
         Frame rate [1/s].
     exposure_s : float
@@ -151,31 +173,41 @@ def dry_run(
     from raingauge.vision.candidates import candidates
     from raingauge.vision.photometric import beta_max_for_exposure, label_streaks, photometric_filter
 
-    frames = np.asarray(frames)
-    if frames.ndim != 3:
+    if isinstance(frames, np.ndarray) and frames.ndim != 3:
         raise InputError(f"dry run: expected gray frames (T, M, N), got shape {frames.shape}")
-    t = frames.shape[0]
-    if t < MIN_FRAMES:
-        raise InputError(f"dry run: {t} frame(s); at least {MIN_FRAMES} are needed (a few seconds of video). "
-                         "Fix: record 10 s or more of the view without rain")
-    if frames.dtype == np.uint8 and table is not None:
-        lin = np.asarray(table, dtype=np.float32)[frames]
-    else:
-        lin = frames.astype(np.float32)
+    lut = None if table is None else np.asarray(table, dtype=np.float32)
     beta_max = beta_max_for_exposure(exposure_s)
+    meter = _MotionMeter(noise_sigma_dn)
+    win: list[np.ndarray] = []
     false = 0
     cand_frac = []
-    for i in range(1, t - 1):
-        mask = candidates(lin[i - 1], lin[i], lin[i + 1], c=c_dn)
+    t = 0
+    for frame in frames:
+        frame = np.asarray(frame)
+        if frame.ndim != 2:
+            raise InputError(f"dry run: expected gray (M, N) frames, got shape {frame.shape}")
+        lin = lut[frame] if (lut is not None and frame.dtype == np.uint8) else frame.astype(np.float32)
+        if win and lin.shape != win[-1].shape:
+            raise InputError("dry run: the frames differ in size. Fix: keep the camera mode fixed")
+        t += 1
+        meter.add(lin)
+        win = (win + [lin])[-3:]
+        if len(win) < 3:
+            continue
+        prev, cur, nxt = win
+        mask = candidates(prev, cur, nxt, c=c_dn)
         cand_frac.append(float(mask.mean()))
         if not mask.any():
             continue
         labels = label_streaks(mask)
-        _accepted, fits = photometric_filter(lin[i - 1], lin[i], lin[i + 1], mask, beta_max=beta_max,
+        _accepted, fits = photometric_filter(prev, cur, nxt, mask, beta_max=beta_max,
                                              labels=labels, noise_sigma=noise_sigma_dn)
         false += int(np.count_nonzero(fits.accepted))
+    if t < MIN_FRAMES:
+        raise InputError(f"dry run: {t} frame(s); at least {MIN_FRAMES} are needed (a few seconds of video). "
+                         "Fix: record 10 s or more of the view without rain")
     seconds = (t - 2) / frame_rate_hz
-    shift, changed = scene_motion(lin, noise_sigma_dn=noise_sigma_dn)
+    shift, changed = meter.result()
     warnings = []
     if shift > MAX_SHIFT_PX:
         warnings.append(f"the view shifts by {shift:.2f} px per frame (limit {MAX_SHIFT_PX}): the camera or "

@@ -481,13 +481,17 @@ def calibrate_geometry(
     square_m: float,
     *,
     n_live_views: int = RECOMMENDED_VIEWS,
+    on_view=None,
     **kwargs,
 ) -> GeometryResult:
-    """Read views from a folder, video file or ``camera:N`` and calibrate (see :func:`calibrate_views`)."""
+    """Read views from a folder, video file or ``camera:N`` and calibrate (see :func:`calibrate_views`).
+
+    ``on_view(count, n_live_views)`` reports progress of a live capture.
+    """
     if isinstance(pattern, str):
         pattern = parse_pattern(pattern)
     if _is_camera(str(source)):
-        views = capture_views(str(source), pattern, n_views=n_live_views)
+        views = capture_views(str(source), pattern, n_views=n_live_views, on_view=on_view)
     else:
         views = read_views(source)
     return calibrate_views(views, pattern, square_m, **kwargs)

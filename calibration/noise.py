@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Iterable
 
 import numpy as np
 
@@ -33,6 +34,7 @@ from raingauge.errors import InputError
 __all__ = [
     "NoiseResult",
     "noise_curve",
+    "temporal_moments",
     "false_candidate_rate",
     "detection_threshold",
     "calibrate_noise",
@@ -120,14 +122,60 @@ class NoiseResult:
         }
 
 
-def noise_curve(frames: np.ndarray, *, n_bins: int = 16, clip: tuple[float, float] = (2.0, 253.0),
-                min_count: int = 20) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def temporal_moments(frames: Iterable[np.ndarray], *, table: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray, int]:
+    """Per-pixel temporal mean and unbiased variance, one frame at a time.
+
+    Parameters
+    ----------
+    frames : iterable of (M, N) arrays, or a (T, M, N) array
+        uint8 frames (linearised through ``table`` when given) or linear floats [gray levels].
+    table : (256,) float, optional
+        Linearisation table [gray levels].
+
+    Returns
+    -------
+    mean : (M*N,) [gray levels]
+    var : (M*N,) [gray levels^2] (NaN when fewer than two frames)
+    t : int
+        Number of frames.
+    """
+    lut = None if table is None else np.asarray(table, dtype=np.float64)
+    t = 0
+    ref = s1 = s2 = None
+    for frame in frames:
+        frame = np.asarray(frame)
+        if frame.ndim != 2:
+            raise InputError(f"noise step: expected gray (M, N) frames, got shape {frame.shape}")
+        x = lut[frame] if (lut is not None and frame.dtype == np.uint8) else frame.astype(np.float64)
+        x = x.ravel()
+        if ref is None:
+            ref = x.copy()
+            s1 = np.zeros_like(x)
+            s2 = np.zeros_like(x)
+        elif x.shape != ref.shape:
+            raise InputError("noise step: the still frames differ in size. Fix: keep the camera mode fixed")
+        d = x - ref  # shifted sums keep the variance accurate
+        s1 += d
+        s2 += d * d
+        t += 1
+    if t == 0:
+        raise InputError("noise step: no frames. Fix: record a few seconds of the still scene")
+    mean = ref + s1 / t
+    var = (s2 - s1 * s1 / t) / (t - 1) if t > 1 else np.full_like(s1, np.nan)
+    return mean, np.maximum(var, 0.0), t
+
+
+def noise_curve(mean: np.ndarray, var: np.ndarray, *, n_bins: int = 16,
+                clip: tuple[float, float] = (2.0, 253.0), min_count: int = 20
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Temporal noise against intensity.
 
     Parameters
     ----------
-    frames : (T, M, N) float
-        Linearised frames of a still scene [gray levels].
+    mean, var : (P,) arrays
+        Per-pixel temporal mean [gray levels] and variance [gray levels^2]
+        (see :func:`temporal_moments`).
     n_bins : int
         Intensity bins between the clip limits.
     clip : (lo, hi)
@@ -138,13 +186,7 @@ def noise_curve(frames: np.ndarray, *, n_bins: int = 16, clip: tuple[float, floa
     Returns
     -------
     levels, sigma, counts : per populated bin [gray levels], [gray levels], [-]
-    mean, var : (M*N,) per-pixel mean [gray levels] and unbiased temporal variance [gray levels^2]
     """
-    frames = np.asarray(frames, dtype=np.float64)
-    t = frames.shape[0]
-    flat = frames.reshape(t, -1)
-    mean = flat.mean(axis=0)
-    var = flat.var(axis=0, ddof=1)
     edges = np.linspace(clip[0], clip[1], n_bins + 1)
     idx = np.digitize(mean, edges) - 1
     levels, sigma, counts = [], [], []
@@ -153,15 +195,15 @@ def noise_curve(frames: np.ndarray, *, n_bins: int = 16, clip: tuple[float, floa
         n = int(sel.sum())
         if n < min_count:
             continue
-        # Robust pooled variance: the median of chi-square-distributed variances,
-        # scaled back to the mean, ignores the few pixels that moved.
+        # Pooled variance without the few pixels that moved: beyond 6x the median
+        # of the (chi-square distributed) variances.
         v = var[sel]
         med = np.median(v)
         ok = v <= 6.0 * max(med, 1e-6)
         levels.append(float(mean[sel][ok].mean()))
         sigma.append(float(np.sqrt(v[ok].mean())))
         counts.append(int(ok.sum()))
-    return np.array(levels), np.array(sigma), np.array(counts, dtype=int), mean, var
+    return np.array(levels), np.array(sigma), np.array(counts, dtype=int)
 
 
 def false_candidate_rate(c_dn: float, sigma_dn: float) -> float:
@@ -226,14 +268,15 @@ def detection_threshold(sigma_dn: float, *, false_rate: float = DEFAULT_FALSE_RA
     return float(max(0.5 * (lo + hi), floor_dn))
 
 
-def calibrate_noise(frames: np.ndarray, *, table: np.ndarray | None = None,
+def calibrate_noise(frames: Iterable[np.ndarray], *, table: np.ndarray | None = None,
                     false_rate: float = DEFAULT_FALSE_RATE, n_bins: int = 16) -> NoiseResult:
     """Noise sigma against intensity and the detection threshold from still frames.
 
     Parameters
     ----------
-    frames : (T, M, N) uint8 (or float, already linear)
-        Frames of a still, rain-free scene.
+    frames : (T, M, N) array or iterable of (M, N) arrays
+        Frames of a still, rain-free scene: uint8 codes, or floats already linear
+        [gray levels].  Read one at a time, so a long recording needs no memory.
     table : (256,) float, optional
         Linearisation table applied to uint8 frames first [gray levels].
     false_rate : float
@@ -246,23 +289,19 @@ def calibrate_noise(frames: np.ndarray, *, table: np.ndarray | None = None,
     InputError
         Fewer than :data:`MIN_FRAMES` frames, or no unclipped pixels.
     """
-    frames = np.asarray(frames)
-    if frames.ndim != 3:
+    if isinstance(frames, np.ndarray) and frames.ndim != 3:
         raise InputError(f"noise step: expected gray frames (T, M, N), got shape {frames.shape}")
-    t = frames.shape[0]
+    mean, var, t = temporal_moments(frames, table=table)
     if t < MIN_FRAMES:
         raise InputError(
             f"noise step: {t} still frame(s); at least {MIN_FRAMES} are needed (20 or more give sigma within a few %). "
             "Fix: record a few seconds of the still scene without rain, camera fixed"
         )
-    if frames.dtype == np.uint8 and table is not None:
-        lin = np.asarray(table, dtype=np.float64)[frames]
-        hi = float(table[253])
-        lo = float(table[2])
+    if table is not None:
+        lo, hi = float(table[2]), float(table[253])
     else:
-        lin = frames.astype(np.float64)
         lo, hi = 2.0, 253.0
-    levels, sigma, counts, mean, var = noise_curve(lin, n_bins=n_bins, clip=(lo, hi))
+    levels, sigma, counts = noise_curve(mean, var, n_bins=n_bins, clip=(lo, hi))
     if levels.size == 0:
         raise InputError(
             "noise step: every pixel of the still frames is black or saturated. "

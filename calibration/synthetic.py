@@ -145,6 +145,20 @@ def _rvec(rot: np.ndarray) -> np.ndarray:
     return cv2.Rodrigues(np.asarray(rot, dtype=np.float64))[0].ravel()
 
 
+def _pixel_rays(width: int, height: int, s: int, k: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """Undistorted normalised rays (x, y, 1) through every super-sampled pixel centre, (H*s*W*s, 3)."""
+    import cv2
+
+    us = (np.arange(width * s) + 0.5) / s - 0.5
+    vs = (np.arange(height * s) + 0.5) / s - 0.5
+    uu, vv = np.meshgrid(us, vs)
+    pts = np.stack([uu.ravel(), vv.ravel()], axis=1).reshape(-1, 1, 2)
+    norm = cv2.undistortPointsIter(
+        pts, k, dist, None, None, (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 60, 1e-12)
+    ).reshape(-1, 2)
+    return np.column_stack([norm, np.ones(len(norm))])
+
+
 def render_checkerboard_views(
     *,
     pattern: tuple[int, int] = (9, 6),
@@ -209,14 +223,7 @@ def render_checkerboard_views(
     # Normalised, undistorted ray direction of every (super-sampled) pixel centre:
     # the same for all views, so computed once.
     s = int(supersample)
-    us = (np.arange(width * s) + 0.5) / s - 0.5
-    vs = (np.arange(height * s) + 0.5) / s - 0.5
-    uu, vv = np.meshgrid(us, vs)
-    pts = np.stack([uu.ravel(), vv.ravel()], axis=1).reshape(-1, 1, 2)
-    norm = cv2.undistortPointsIter(
-        pts, k, dist, None, None, (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10)
-    ).reshape(-1, 2)
-    ray = np.column_stack([norm, np.ones(len(norm))])
+    ray = _pixel_rays(width, height, s, k, dist)
 
     obj = np.zeros((rows * cols, 3), np.float64)
     obj[:, :2] = np.mgrid[0:cols, 0:rows].T.reshape(-1, 2) * square_m
@@ -449,7 +456,7 @@ def exposure_file_name(exposure_s: float) -> str:
 
 
 def write_demo_captures(folder: str | Path, *, seed: int = 0, image_size: tuple[int, int] = (400, 300),
-                        n_views: int = 8, supersample: int = 2) -> dict:
+                        n_views: int = 8, supersample: int = 3) -> dict:
     """Write a full set of synthetic captures for ``raingauge calibrate``.
 
     Layout::

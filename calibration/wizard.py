@@ -57,7 +57,8 @@ STEP_KEYS = {
     "focus": ("focus_distance_m", "f_number", "pixel_pitch_m"),
     "dry_run": (),
 }
-MAX_STILL_FRAMES = 120
+#: Most frames read for the noise step and the dry run (30 s at 30 frames/s).
+MAX_STILL_FRAMES = 300
 MAX_DRY_FRAMES = 900
 
 
@@ -131,47 +132,71 @@ def _is_camera(src: str) -> bool:
     return str(src).startswith("camera:")
 
 
-def _read_gray_frames(src: str, *, limit: int, what: str):
-    """(T, M, N) uint8 frames and the source's frame rate (or None) from a folder, video or camera:N."""
-    import numpy as np
+class _GrayFrames:
+    """Gray uint8 frames from a folder, a video or camera:N, read one at a time.
 
-    from raingauge.errors import InputError, SourceError
-    from raingauge.videoio import FrameReader
+    Iterating checks, at the end, that no image was unreadable and that all
+    frames share one size.  ``fps`` is the source's frame rate when it has one.
+    """
 
-    if _is_camera(src):
+    def __init__(self, src: str, *, limit: int, what: str):
+        from raingauge.errors import SourceError
+        from raingauge.videoio import FrameReader
+
+        self.src, self.limit, self.what = str(src), int(limit), what
+        self.fps = None
+        self._reader = None
+        if _is_camera(self.src):
+            import cv2
+
+            spec = self.src.split(":", 1)[1]
+            self._device = int(spec) if spec.isdigit() else spec
+            cap = cv2.VideoCapture(self._device)
+            ok = cap.isOpened()
+            if ok:
+                self.fps = float(cap.get(cv2.CAP_PROP_FPS)) or None
+            cap.release()
+            if not ok:
+                raise SourceError(f"{what}: camera {self.src} cannot be opened. Fix: check the camera, or give a folder")
+        else:
+            self._reader = FrameReader(self.src, mode="gray")
+            self.fps = self._reader.fps
+
+    def _raw(self):
+        if self._reader is not None:
+            yield from self._reader
+            return
         import cv2
 
-        spec = src.split(":", 1)[1]
-        cap = cv2.VideoCapture(int(spec) if spec.isdigit() else spec)
-        if not cap.isOpened():
-            raise SourceError(f"{what}: camera {src} cannot be opened. Fix: check the camera, or give a folder")
-        fps = float(cap.get(cv2.CAP_PROP_FPS)) or None
-        frames = []
+        cap = cv2.VideoCapture(self._device)
         try:
-            while len(frames) < limit:
+            while True:
                 ok, img = cap.read()
                 if not ok:
                     break
-                frames.append(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img)
+                yield cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img
         finally:
             cap.release()
-        if not frames:
-            raise SourceError(f"{what}: camera {src} delivered no frame")
-        return np.stack(frames), fps
-    reader = FrameReader(src, mode="gray")
-    frames = []
-    for frame in reader:
-        frames.append(frame)
-        if len(frames) >= limit:
-            break
-    if reader.corrupt_frames:
-        raise InputError(f"{what} {src}: {reader.corrupt_frames} image(s) cannot be read. "
-                         "Fix: delete or re-export the damaged files")
-    if not frames:
-        raise InputError(f"{what} {src}: no frame could be read. Fix: check the files")
-    if len({f.shape for f in frames}) > 1:
-        raise InputError(f"{what} {src}: frames of different sizes. Fix: keep the camera mode fixed")
-    return np.stack(frames), reader.fps
+
+    def __iter__(self):
+        from raingauge.errors import InputError
+
+        shape = None
+        n = 0
+        for frame in self._raw():
+            if shape is None:
+                shape = frame.shape
+            elif frame.shape != shape:
+                raise InputError(f"{self.what} {self.src}: frames of different sizes. Fix: keep the camera mode fixed")
+            yield frame
+            n += 1
+            if n >= self.limit:
+                break
+        if self._reader is not None and self._reader.corrupt_frames:
+            raise InputError(f"{self.what} {self.src}: {self._reader.corrupt_frames} image(s) cannot be read. "
+                             "Fix: delete or re-export the damaged files")
+        if n == 0:
+            raise InputError(f"{self.what} {self.src}: no frame could be read. Fix: check the files or the camera")
 
 
 def _parse_f_numbers(text: str) -> list[float]:
@@ -243,7 +268,13 @@ class Session:
         if square_m is None:
             raise InputError("geometry: the size of a checkerboard square is needed. Fix: measure one square "
                              "and give it in metres, e.g. --square-m 0.025")
-        res = geometry.calibrate_geometry(source, pattern, square_m, n_live_views=views,
+        if _is_camera(str(source)):
+            print(f"move the board through the view: {views} different positions and tilts are collected")
+
+        def progress(count, total):
+            print(f"  view {count}/{total}", flush=True)
+
+        res = geometry.calibrate_geometry(source, pattern, square_m, n_live_views=views, on_view=progress,
                                           distortion_model=distortion_model, max_rms_px=max_rms_px)
         prov = res.to_provenance()
         prov.update(source=str(source), pattern=str(pattern), square_m=float(square_m))
@@ -285,8 +316,8 @@ class Session:
     def run_noise(self, source: str, *, false_rate: float = 1e-3) -> dict:
         from calibration import noise
 
-        frames, _fps = _read_gray_frames(source, limit=MAX_STILL_FRAMES, what="still scene")
-        res = noise.calibrate_noise(frames, table=self.table(), false_rate=false_rate)
+        frames = _GrayFrames(source, limit=MAX_STILL_FRAMES, what="still scene")
+        res = noise.calibrate_noise(iter(frames), table=self.table(), false_rate=false_rate)
         prov = res.to_provenance()
         prov["source"] = str(source)
         self.results["noise"] = _jsonable({
@@ -355,9 +386,9 @@ class Session:
     def run_dry(self, source: str) -> dict:
         from calibration import dryrun
 
-        frames, fps = _read_gray_frames(source, limit=MAX_DRY_FRAMES, what="dry-run video")
-        rate = fps or float(self.value("frame_rate_hz"))
-        res = dryrun.dry_run(frames, frame_rate_hz=rate, exposure_s=float(self.value("exposure_s")),
+        frames = _GrayFrames(source, limit=MAX_DRY_FRAMES, what="dry-run video")
+        rate = frames.fps or float(self.value("frame_rate_hz"))
+        res = dryrun.dry_run(iter(frames), frame_rate_hz=rate, exposure_s=float(self.value("exposure_s")),
                              c_dn=float(self.value("detection_threshold_dn")),
                              noise_sigma_dn=float(self.value("noise_sigma_dn")), table=self.table())
         prov = res.to_provenance()

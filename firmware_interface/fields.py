@@ -1,4 +1,4 @@
-"""The one table of output fields.
+"""The one table of output fields [ModbusAP] [VaisalaWXT530] [NMEA0183].
 
 Every quantity the instrument publishes is described once, in :data:`FIELDS`:
 its name (the key of an instrument record, the SQLite column and the CSV
@@ -85,7 +85,7 @@ STATUS_BITS: dict[str, int] = {
 }
 _STATUS_TEXT = {
     "camera_ok": "frames arrive from the camera",
-    "rain_detected": "the last record saw rain (rate > 0)",
+    "rain_detected": "the last record saw rain (intensity class above none)",
     "low_confidence": "the last record carries a quality flag (few drops, short window, missing data)",
     "calibrated": "the camera profile comes from `raingauge calibrate` (not a default)",
     "storage_fault": "the history database cannot be written (e.g. disk full); measurement goes on",
@@ -213,7 +213,8 @@ FIELDS: tuple[Field, ...] = (
     Field("drops_rejected_defocus", "count", "streaks rejected as out of focus in the last window",
           sql_type="INTEGER", float_register=220),
     Field("window_s", "s", "length of the averaging window", float_register=222),
-    Field("rain_duration_s", "s", "time with rain since the last reset", float_register=224),
+    Field("rain_duration_s", "s", "time with rain (steps whose intensity class is above none) since the last reset",
+          float_register=224),
     Field("t_start_s", "s", "start of the window on the gauge clock (seconds since start)"),
     Field("t_end_s", "s", "end of the window on the gauge clock (seconds since start)"),
     Field("missing", "0/1", "1 when the camera delivered no frames for this window (no data, not zero rain)",

@@ -1,4 +1,4 @@
-"""Modbus TCP and RTU server publishing the gauge's records (pymodbus 3.16).
+"""Modbus TCP and RTU server publishing the gauge's records (pymodbus 3.16) [ModbusAP] [ModbusSerial].
 
 The register map comes from :mod:`firmware_interface.fields` (see
 ``docs/modbus_registers.md``).  Input registers (function 04) hold the last
@@ -42,7 +42,7 @@ from firmware_interface.fields import (
     record_defaults,
 )
 
-__all__ = ["ModbusOutput", "parse_host_port", "identity_info", "VENDOR", "PRODUCT_CODE"]
+__all__ = ["ModbusOutput", "ModbusProcess", "parse_host_port", "identity_info", "VENDOR", "PRODUCT_CODE"]
 
 log = logging.getLogger("raingauge.modbus")
 
@@ -404,3 +404,161 @@ class ModbusOutput:
 
         if self._loop is not None and self._core is not None:
             asyncio.run_coroutine_threadsafe(write(), self._loop)
+
+
+# ---------------------------------------------------------------------- in its own process
+def _serve_in_child(kwargs: dict, commands, events) -> None:
+    """Body of the Modbus server process (see :class:`ModbusProcess`)."""
+    import os
+    import queue as _queue
+
+    parent = os.getppid()
+    nice = kwargs.pop("nice", 0)
+    if nice:
+        try:
+            os.nice(nice)  # measurement first: the server yields the CPU to the gauge
+        except OSError:
+            pass
+    out = ModbusOutput(**kwargs,
+                       on_reset=lambda: events.put(("reset",)),
+                       on_setting=lambda name, value: events.put(("setting", name, value)))
+    try:
+        out.start()
+    except Exception as exc:  # noqa: BLE001 - reported to the parent
+        events.put(("error", str(exc)))
+        return
+    events.put(("started", out.tcp_port))
+    try:
+        while True:
+            try:
+                cmd = commands.get(timeout=1.0)
+            except _queue.Empty:
+                if os.getppid() != parent:  # the instrument died: free the port
+                    return
+                continue
+            kind = cmd[0]
+            if kind == "publish":
+                out.publish(cmd[1])
+            elif kind == "status":
+                out.set_status(cmd[1])
+            elif kind == "window":
+                out.set_window(cmd[1])
+            elif kind == "stop":
+                return
+    finally:
+        out.stop()
+
+
+class ModbusProcess:
+    """:class:`ModbusOutput` run in a child process, same interface.
+
+    Serving many clients costs CPU time in the Python interpreter that holds
+    it; in a separate process a flood of requests cannot take the interpreter
+    lock from the measuring loop.  Records go to the child through a queue
+    (``publish`` never blocks); resets and setting changes come back through
+    another one and call ``on_reset`` / ``on_setting`` on a thread of this
+    process.  The child runs at a lower priority (``nice``, default +10) so that
+    when the CPU is short the gauge keeps it and Modbus answers a little later.
+    The child exits when this process dies.
+    """
+
+    def __init__(self, *, on_reset: Callable[[], None] | None = None,
+                 on_setting: Callable[[str, int], None] | None = None, nice: int = 10, **kwargs):
+        from raingauge.errors import ConfigError
+
+        ModbusOutput(**kwargs)  # validate the arguments here, with the same errors
+        kwargs["nice"] = int(nice)
+        if "rtu" in kwargs and kwargs["rtu"] is None:
+            kwargs.pop("rtu")
+        self.kwargs = kwargs
+        self.on_reset = on_reset
+        self.on_setting = on_setting
+        self.tcp = kwargs.get("tcp")
+        self.tcp_port: int | None = None
+        self.fault = False
+        self._proc = None
+        self._commands = None
+        self._events = None
+        self._reader: threading.Thread | None = None
+        self._ConfigError = ConfigError
+
+    def start(self, timeout_s: float = 30.0) -> "ModbusProcess":
+        import multiprocessing as mp
+        import queue as _queue
+
+        ctx = mp.get_context("spawn")
+        self._commands = ctx.Queue(maxsize=1000)
+        self._events = ctx.Queue()
+        self._proc = ctx.Process(target=_serve_in_child, args=(self.kwargs, self._commands, self._events),
+                                 name="raingauge-modbus", daemon=True)
+        self._proc.start()
+        try:
+            first = self._events.get(timeout=timeout_s)
+        except _queue.Empty:
+            self._proc.terminate()
+            raise self._ConfigError("Modbus server process did not start in time") from None
+        if first[0] == "error":
+            self._proc.join(5)
+            raise self._ConfigError(first[1])
+        self.tcp_port = first[1]
+        self._reader = threading.Thread(target=self._read_events, name="modbus-events", daemon=True)
+        self._reader.start()
+        return self
+
+    def _read_events(self) -> None:
+        while True:
+            try:
+                ev = self._events.get()
+            except (EOFError, OSError, ValueError):
+                return
+            if ev is None:
+                return
+            try:
+                if ev[0] == "reset" and self.on_reset is not None:
+                    self.on_reset()
+                elif ev[0] == "setting" and self.on_setting is not None:
+                    self.on_setting(ev[1], ev[2])
+            except Exception:  # noqa: BLE001
+                log.exception("Modbus event %r", ev)
+
+    def _send(self, cmd) -> None:
+        import queue as _queue
+
+        if self._commands is None:
+            return
+        try:
+            self._commands.put_nowait(cmd)
+        except _queue.Full:
+            self.fault = True
+        if self._proc is not None and not self._proc.is_alive():
+            if not self.fault:
+                log.error("Modbus server process ended (exit code %s)", self._proc.exitcode)
+            self.fault = True
+
+    def publish(self, record: dict[str, Any]) -> None:
+        self._send(("publish", dict(record)))
+
+    def set_status(self, status: int) -> None:
+        self._send(("status", int(status)))
+
+    def set_window(self, window_s: float) -> None:
+        self._send(("window", float(window_s)))
+
+    def stop(self) -> None:
+        if self._proc is None:
+            return
+        self._send(("stop",))
+        self._proc.join(5)
+        if self._proc.is_alive():
+            self._proc.terminate()
+            self._proc.join(2)
+        self._events.put(None)
+        if self._reader is not None:
+            self._reader.join(2)
+        self._proc = None
+
+    def __enter__(self) -> "ModbusProcess":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()

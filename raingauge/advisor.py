@@ -116,6 +116,8 @@ DEPTH_CATEGORIES = {"small": 0.5, "large": math.inf}
 #: (WMO heavy rain, 7.6 mm/h).
 HEAVY_RAIN_MM_H = 7.6
 SLOW_SHUTTER_MODES = ("auto", "always", "never")
+#: Gain change [dB] beyond which the reason warns that gain alone cannot keep the brightness.
+GAIN_RANGE_DB = 18.0
 #: Table 1 rows: label -> (motion, near, depth, paper T [s] or None, paper N or None).
 TABLE1_ROWS = {
     "a": ("slow", "close", "large", 0.066, 14.0),
@@ -462,7 +464,9 @@ def advise_reduce(profile, scene: Scene, *, current: Settings | None = None,
                f"{scene.near_m:.3g}-{'inf' if math.isinf(scene.far_m) else f'{scene.far_m:.3g}'} m "
                "(wider apertures blur nearby drops, Fig. 15(b))")
     gain = _gain_db(current, new)
-    why.append(f"gain {gain:+.1f} dB keeps the brightness (Eq. 20)")
+    why.append(f"gain {gain:+.1f} dB keeps the brightness (Eq. 20)"
+               + (f" (more than a camcorder's usual {GAIN_RANGE_DB:g} dB of gain control: use a neutral-density "
+                  "filter or accept the brightness change)" if abs(gain) > GAIN_RANGE_DB else ""))
     cur_problems = _scene_sharp(profile, current, scene)
     if cur_problems:
         why.append("the current settings do not keep this scene sharp (" + "; ".join(cur_problems) + ")")
@@ -619,7 +623,7 @@ def advise_gauge(profile, *, a_min_m: float = 0.5e-3, window_s: float = 60.0,
         f"focus z0 = {z0:.3g} m <= 2 f a_min = {z_limit:.3g} m: drops of radius >= {a_min_m * 1e3:g} mm are "
         "at least a pixel wide in focus (Sec. 8)",
         f"F/{n:g}, the widest aperture: the shallowest depth of field, a thin sample volume and few "
-        "overlapping streaks; defocused drops fail the size-velocity test",
+        "overlapping streaks, and defocused drops fail the size-velocity test",
         f"exposure {t * 1e3:.3g} ms: short, so streaks stay bright (beta = tau/T), yet >= 3 px long for "
         f"the smallest drops and >= 2 tau_max; the fastest drops streak {streak_fast:.0f} px",
     ]

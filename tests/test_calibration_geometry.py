@@ -122,3 +122,22 @@ def test_bad_patterns_are_rejected(text):
 def test_pattern_parsing():
     assert parse_pattern("9x6") == (9, 6)
     assert parse_pattern(" 7 X 5 ") == (7, 5)
+
+
+def test_live_capture_keeps_distinct_views(views, tmp_path):
+    """capture_views reads any OpenCV source; a video stands in for the camera here."""
+    from calibration.geometry import capture_views
+    from raingauge.videoio import FrameWriter
+
+    images, _ = views
+    video = tmp_path / "live.mkv"
+    writer = FrameWriter(video, fps=10.0)
+    for im in images:
+        for _ in range(3):  # the board held still for three frames
+            writer.write(cv2.cvtColor(im, cv2.COLOR_GRAY2BGR))
+    writer.close()
+    seen = []
+    got = capture_views(str(video), (9, 6), n_views=20, on_view=lambda k, n: seen.append(k))
+    assert 5 <= len(got) <= len(images)  # repeated frames of one pose are kept once
+    assert seen == list(range(1, len(got) + 1))
+    assert calibrate_views(got, (9, 6), 0.025).focal_length_px == pytest.approx(TRUE_F, rel=0.01)

@@ -82,3 +82,11 @@ def test_too_few_frames_and_saturated_scene():
         calibrate_noise(frames)
     with pytest.raises(InputError, match="black or saturated"):
         calibrate_noise(np.full((6, 20, 20), 255, np.uint8))
+
+
+def test_frames_streamed_one_at_a_time_give_the_same_result():
+    frames, _ = render_still_frames(read_sigma_dn=1.5, n_frames=8, seed=6)
+    a = calibrate_noise(frames)
+    b = calibrate_noise(iter(list(frames)))
+    assert a.noise_sigma_dn == pytest.approx(b.noise_sigma_dn, rel=1e-12)
+    assert a.c_dn == pytest.approx(b.c_dn, rel=1e-12)

@@ -262,3 +262,34 @@ def test_demo_mode(tmp_path, capsys):
     assert "recovered against truth" in text
     truth = json.loads((tmp_path / "captures" / "truth.json").read_text())
     assert load_profile(out).focal_length_px == pytest.approx(truth["geometry"]["focal_length_px"], rel=0.01)
+
+
+def test_video_sources_for_still_and_dry_run(captures, tmp_path):
+    from raingauge.videoio import FrameWriter, read_frames
+
+    folder, truth = captures
+    for name in ("still", "dry"):
+        writer = FrameWriter(tmp_path / f"{name}.mkv", fps=25.0)
+        for frame in read_frames(folder / name, mode="gray"):
+            writer.write(frame)
+        writer.close()
+    out = tmp_path / "video.toml"
+    assert main(["calibrate", "--bracket", str(folder / "bracket"), "--still", str(tmp_path / "still.mkv"),
+                 "--dry", str(tmp_path / "dry.mkv"), "--out", str(out)]) == 0
+    prof = load_profile(out)
+    assert prof.noise_sigma_dn == pytest.approx(truth["still"]["sigma_dn"], rel=0.10)
+    dry = prof.provenance["dry_run"]
+    assert dry["frame_rate_hz"] == pytest.approx(25.0)  # the video's own rate, not the profile's 30
+    assert dry["seconds"] == pytest.approx((45 - 2) / 25.0, rel=1e-3)
+
+
+def test_unreadable_still_frame_writes_nothing(captures, tmp_path, capsys):
+    folder, _ = captures
+    still = tmp_path / "still"
+    shutil.copytree(folder / "still", still)
+    (still / "frame_005.png").write_bytes(b"garbage")
+    outdir = tmp_path / "out"
+    outdir.mkdir()
+    assert main(["calibrate", "--still", str(still), "--out", str(outdir / "x.toml")]) == 2
+    assert "1 image(s) cannot be read" in capsys.readouterr().err
+    _assert_nothing_written(outdir)

@@ -367,6 +367,9 @@ def test_modbus_reset_resets_the_instrument_accumulation(tmp_path):
     assert accs[0] > 5.0                                  # resumed from the stored 5 mm
     drop = [i for i in range(1, len(accs)) if accs[i] < accs[i - 1]]
     assert len(drop) == 1 and accs[drop[0]] < 0.1         # one reset, from zero again
+    h = History(tmp_path / "h.sqlite", readonly=True)     # what a restart resumes from
+    assert h.settings()["accumulation_mm"] == pytest.approx(accs[-1])
+    h.close()
 
 
 def test_diagnostics_write_snapshot_and_survive_failures(tmp_path, caplog):
@@ -389,3 +392,85 @@ def test_diagnostics_write_snapshot_and_survive_failures(tmp_path, caplog):
     assert len([p for p in (tmp_path / "diag").iterdir()]) == 2
     diag.close()
     bad.close()
+
+
+# ---------------------------------------------------------------------- end to end, real gauge
+def test_run_end_to_end_on_the_simulated_camera_then_sigterm(tmp_path):
+    """`raingauge run` on simulated rain with the real gauge: records printed, served over Modbus
+    TCP, sent as NMEA on a pty, stored in SQLite; SIGTERM flushes and exits 0."""
+    import re
+    import threading
+
+    import pynmea2
+    from pyModbusTCP.client import ModbusClient
+
+    pytest.importorskip("raingauge.gauge").RainGauge
+    pytest.importorskip("raingauge.render.simulator").simulate
+    db = tmp_path / "rg.sqlite"
+    master, slave = os.openpty()
+    os.set_blocking(master, False)
+    cmd = [sys.executable, "-m", "raingauge", "run", "--source", "simulate:20", "--sim-size", "96x72",
+           "--fast", "--step", "1", "--window", "2", "--db", str(db), "--modbus-tcp", "127.0.0.1:0",
+           "--serial", os.ttyname(slave), "--diagnostics", "off"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    out_lines, err_lines = [], []
+    threading.Thread(target=lambda: out_lines.extend(iter(proc.stdout.readline, "")), daemon=True).start()
+    threading.Thread(target=lambda: err_lines.extend(iter(proc.stderr.readline, "")), daemon=True).start()
+    serial_bytes = b""
+    try:
+        deadline = time.monotonic() + 90
+        while sum(line.startswith("20") for line in out_lines) < 3 and time.monotonic() < deadline:
+            assert proc.poll() is None, "".join(err_lines)
+            try:
+                serial_bytes += os.read(master, 4096)
+            except BlockingIOError:
+                pass
+            time.sleep(0.1)
+        port = int(re.search(r"Modbus TCP on 127\.0\.0\.1:(\d+)", "".join(err_lines)).group(1))
+        regs = ModbusClient(host="127.0.0.1", port=port, unit_id=1, timeout=2).read_input_registers(0, 12)
+        assert regs is not None and regs[1] & (1 << STATUS_BITS["camera_ok"])
+        assert (regs[10] << 16 | regs[11]) > 1.7e9
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(30) == 0, "".join(err_lines)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    time.sleep(0.2)
+    try:
+        serial_bytes += os.read(master, 65536)
+    except BlockingIOError:
+        pass
+    os.close(master)
+    os.close(slave)
+    printed = [line for line in out_lines if line.startswith("20")]
+    h = History(db, readonly=True)
+    rows = list(h.rows())
+    assert len(rows) == len(printed) >= 3 and h.integrity_ok()
+    assert all(r["rain_rate_mm_h"] is not None and r["missing"] == 0 for r in rows)
+    assert rows[-1]["accumulation_mm"] >= rows[0]["accumulation_mm"]
+    h.close()
+    sentences = [pynmea2.parse(line, check=True) for line in serial_bytes.decode().splitlines() if line]
+    assert len(sentences) >= 4 and {type(s).__name__ for s in sentences} >= {"XDR"}
+    assert "records" in "".join(err_lines)
+
+
+def test_run_command_reports_bad_configuration(tmp_path, capsys):
+    from raingauge.cli import main
+
+    assert main(["run", "--config", str(tmp_path / "none.toml")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[gauge]\nwindow_s = 25\nstep_s = 10\n')
+    assert main(["run", "--config", str(cfg)]) == 2
+    err = capsys.readouterr().err
+    assert "[gauge].window_s" in err and "Fix:" in err
+    assert main(["run", "--source", "simulate:lots", "--db", "off", "--modbus-tcp", "off"]) == 2
+    assert "simulate:10" in capsys.readouterr().err
+    with pytest.raises(ConfigError, match="WIDTHxHEIGHT"):
+        from raingauge.commands import run as run_cmd
+        import argparse
+
+        p = argparse.ArgumentParser()
+        run_cmd.add_arguments(p)
+        run_cmd.run(p.parse_args(["--sim-size", "big"]))

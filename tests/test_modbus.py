@@ -241,6 +241,16 @@ def test_minimalmodbus_over_rtu():
         inst.serial.timeout = 1.0
         inst.clear_buffers_before_each_transaction = True
         time.sleep(0.3)
+        # line noise first: the slave loses at most one request, then answers again
+        inst.serial.write(bytes(random.Random(3).randrange(256) for _ in range(200)))
+        time.sleep(0.3)
+        answers = []
+        for _ in range(3):
+            try:
+                answers.append(inst.read_register(2, 2, functioncode=4))
+            except minimalmodbus.NoResponseError:
+                answers.append(None)
+        assert answers[1:] == [pytest.approx(12.34)] * 2
         assert inst.read_register(2, 2, functioncode=4) == pytest.approx(12.34)
         assert inst.read_long(3, functioncode=4, byteorder=minimalmodbus.BYTEORDER_BIG) == 123456
         assert inst.read_register(7, 1, functioncode=4, signed=True) == pytest.approx(-3.2)
@@ -259,3 +269,38 @@ def test_minimalmodbus_over_rtu():
     finally:
         out.stop()
         link.close()
+
+
+def test_server_in_its_own_process_same_interface():
+    from firmware_interface.modbus import ModbusProcess
+
+    events = []
+    out = ModbusProcess(tcp=("127.0.0.1", 0), device_id=7, on_reset=lambda: events.append("reset"),
+                        on_setting=lambda n, v: events.append((n, v)))
+    with out:
+        out.publish(_record())
+        c = pyModbusTCP.ModbusClient(host="127.0.0.1", port=out.tcp_port, unit_id=1, timeout=2.0)
+        assert _wait_for(lambda: (c.read_input_registers(2, 1) or [0])[0] == 1234)
+        out.set_status(0b10001)
+        assert _wait_for(lambda: c.read_input_registers(1, 1) == [0b10001])
+        assert c.write_single_register(0, F.RESET_MAGIC) and c.write_single_register(2, 30)
+        assert _wait_for(lambda: events == ["reset", ("window_s", 30)])
+        assert not c.write_single_register(2, 31) and c.last_except == 3
+        port = out.tcp_port
+    # stopped: nothing listens on the port any more
+    with socket.socket() as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        s.bind(("127.0.0.1", port))
+        s.listen()
+    from raingauge.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="1-247"):
+        ModbusProcess(tcp=("127.0.0.1", 0), unit_id=0)
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen()
+    try:
+        with pytest.raises(ConfigError, match="cannot listen"):
+            ModbusProcess(tcp=("127.0.0.1", busy.getsockname()[1])).start()
+    finally:
+        busy.close()

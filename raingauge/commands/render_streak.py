@@ -49,8 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-light", action="store_true", help="ambient (and --envmap) lighting only")
     parser.add_argument("--envmap", default=None,
                         help="equirectangular environment image (camera frame), added to the lighting")
-    parser.add_argument("--background", type=float, default=None, metavar="RADIANCE",
-                        help="background radiance behind the streak (default: the ambient)")
+    parser.add_argument("--background", type=float, default=0.0, metavar="RADIANCE",
+                        help="background radiance behind the streak, relative to the light (default 0: "
+                             "the streak alone, as in a streak database)")
     parser.add_argument("--gain", type=float, default=None,
                         help="PNG value = 255 * gain * radiance (default: brightest pixel -> 255)")
     parser.add_argument("--supersample", type=int, default=2, help="rays per pixel side (default 2)")
@@ -110,8 +111,9 @@ def run(args: argparse.Namespace) -> int:
         amp_transverse=args.amp_transverse, phase_axisymmetric=math.radians(args.phase_axisymmetric),
         phase_transverse=math.radians(args.phase_transverse), environment=env,
         ambient=args.ambient, light_size_rad=math.radians(args.light_size), supersample=args.supersample)
-    background = args.ambient if args.background is None else args.background
-    image = streak.composite(background)
+    if args.background < 0:
+        raise ConfigError(f"--background must be >= 0, got {args.background}")
+    image = streak.composite(args.background)
     gain = args.gain if args.gain is not None else 1.0 / max(float(image.max()), 1e-12)
     png = np.clip(np.rint(255.0 * gain * image), 0, 255).astype(np.uint8)
     if not cv2.imwrite(str(out), png):

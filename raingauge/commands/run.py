@@ -107,21 +107,19 @@ def build_instrument(config, *, print_records=True, gauge_factory=None):
         elif name == "unit_id":
             inst.settings_extra["unit_id"] = int(value)
         if inst.history_writer is not None:
-            try:
-                inst.history_writer.history.set_settings(**{name: value})
-            except Exception as exc:  # noqa: BLE001
-                log.warning("could not store %s = %s: %s", name, value, exc)
+            inst.history_writer.put_settings({name: value})
 
     m = config.modbus
     if m["tcp"] or m["rtu"]:
-        from firmware_interface.modbus import ModbusOutput, parse_host_port
+        from firmware_interface.modbus import ModbusProcess, parse_host_port
         from firmware_interface.serial_out import parse_port_spec
 
         rtu = None
         if m["rtu"]:
             port, baud = parse_port_spec(m["rtu"], default_baud=19200)
             rtu = {"port": port, "baudrate": baud, "parity": m["rtu_parity"]}
-        modbus = ModbusOutput(tcp=parse_host_port(m["tcp"]) if m["tcp"] else None, rtu=rtu, unit_id=unit_id,
+        # In its own process: a flood of Modbus requests cannot slow the gauge.
+        modbus = ModbusProcess(tcp=parse_host_port(m["tcp"]) if m["tcp"] else None, rtu=rtu, unit_id=unit_id,
                               device_id=profile.device_id, window_s=window_s, step_s=step_s,
                               on_reset=on_reset, on_setting=on_setting, model=profile.name)
         modbus.start()

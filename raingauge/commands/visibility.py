@@ -30,6 +30,7 @@ FIG15_PANELS = {
     "c": ("focus", (4.0, 40.0), dict(focal_length_px=8000.0, exposure_s=0.016, f_number=6.7)),
 }
 _KEY = {"exposure": "exposure_s", "f-number": "f_number", "focus": "focus_distance_m"}
+_SHORT = {"focal_length_px": "f", "f_number": "N", "focus_distance_m": "z0 [m]", "exposure_s": "T [s]"}
 _LABEL = {"exposure": "exposure time T [ms]", "f-number": "F-number N", "focus": "focus distance z0 [m]"}
 
 
@@ -148,9 +149,9 @@ def run(args: argparse.Namespace) -> int:
         written = []
         for panel, (which, xs, ys) in curves.items():
             fixed = FIG15_PANELS[panel][2]
-            desc = ", ".join(f"{k}={v:g}" for k, v in fixed.items())
+            desc = ", ".join(f"{_SHORT[k]}={v:g}" for k, v in fixed.items())
             path = out_dir / f"fig15{panel}_{which}.png"
-            _plot(path, which, xs, ys, f"Fig. 15({panel}): {desc}, p={pitch:g} m")
+            _plot(path, which, xs, ys, f"Fig. 15({panel}): {desc}")
             written.append(str(path))
         if args.json:
             print(json.dumps({p: {"which": w, "x": list(map(float, x)), "sigma_r": list(map(float, y))}

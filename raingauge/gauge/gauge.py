@@ -31,7 +31,13 @@ import numpy as np
 
 from raingauge.errors import InputError
 from raingauge.gauge import products as _products
-from raingauge.gauge.rejection import passes_blur, passes_velocity_law, velocity_log_ratio
+from raingauge.gauge.rejection import (
+    exposure_area_px2,
+    passes_blur,
+    passes_velocity_law,
+    photometric_focus,
+    velocity_log_ratio,
+)
 from raingauge.gauge.streaks import StreakProps, change_images, detect_streaks, fit_batch
 from raingauge.gauge.volume import (
     DEFOCUS_MODELS,
@@ -137,6 +143,7 @@ class RainGauge:
         self._accum_mm = 0.0
         self._last_t = None
         self._sharpness: deque = deque(maxlen=int(max(10 * profile.frame_rate_hz, 10)))
+        self._brightness: deque = deque(maxlen=400)     # E_r estimates of law-abiding streaks
         self._empty_scale = self._typical_drop_rate()
 
     # ------------------------------------------------------------------ public
@@ -291,35 +298,61 @@ class RainGauge:
         props = [StreakProps(int(lab), stats[lab, :4], change, labels, prof, noise_sigma=self.noise_change,
                              prev=prev, cur=cur, shape=self._shape) for lab in self._screen(stats)]
         fit_batch(props, shape=self._shape)
+        M, N = prof.shape
+        cands = []
         for sp in props:
             w_app = sp.apparent_width_px
             mot = sp.motion_y_px
-            if not (np.isfinite(w_app) and np.isfinite(mot) and mot > 0 and w_app > 0):
+            plat = sp.row_plateau
+            if not (np.isfinite(w_app) and np.isfinite(mot) and mot > 0 and w_app > 0 and plat > 0):
                 rejected += 1
                 continue
             dx = sp.axis[2] * mot
             # whole streak, by the fitted geometry
             xc, yc = sp.centroid_px
-            M, N = prof.shape
             half_w = 0.5 * (w_app + abs(dx)) + EDGE_MARGIN_PX
             half_h = 0.5 * (w_app + mot) + EDGE_MARGIN_PX
             if xc - half_w < 0 or xc + half_w > N - 1 or yc - half_h < 0 or yc + half_h > M - 1:
                 continue
             a_app = w_app * z0 / (2 * f)
             v_app = mot * z0 / (f * T)
-            ok = bool(passes_velocity_law(a_app, v_app, w_app, mot, model=self.velocity_model))
-            if self.defocus_model == "pillbox":
-                ok = ok and bool(passes_blur(sp.blur_px, sp.width_px))
-            if ok:
-                bf = sp.beta_fit
-                if bf is not None and not (-0.05 <= bf[0] <= bmax + 0.05):
-                    ok = False
-            if not ok:
+            if not bool(passes_velocity_law(a_app, v_app, w_app, mot, model=self.velocity_model)):
                 rejected += 1
                 continue
+            bf = sp.beta_fit
+            if bf is not None and not (-0.05 <= bf[0] <= bmax + 0.05):
+                rejected += 1
+                continue
+            if self.defocus_model == "pillbox":
+                if not bool(passes_blur(sp.blur_px, sp.width_px)):
+                    rejected += 1
+                    continue
+                cands.append((sp, w_app, mot, dx, xc, yc, None))
+                continue
+            ib = sp.background_dn
+            total = float(exposure_area_px2(plat, mot, w_app))
+            focused_contrast = 4.0 * total / (math.pi * w_app * w_app)
+            if np.isfinite(ib) and w_app >= 2.5:
+                self._brightness.append(ib + focused_contrast)
+            cands.append((sp, w_app, mot, dx, xc, yc, (ib, total)))
+        if self.defocus_model == "uniform" and cands and self._brightness:
+            # the drop brightness E_r: the sharpest of the law-abiding streaks (defocus only dims)
+            e_r = float(np.percentile(np.asarray(self._brightness), 90))
+        else:
+            e_r = float("nan")
+        for sp, w_app, mot, dx, xc, yc, photo in cands:
+            if photo is not None:
+                ib, total = photo
+                q = float(photometric_focus(total, w_app, e_r - ib)) if np.isfinite(e_r) else 1.0
+                if not q >= self.volume.q_min:
+                    rejected += 1
+                    continue
+                w_true = w_app * math.sqrt(min(q, 1.0))
+                a0 = w_true * z0 / (2 * f)
+                a = w_true * float(self.volume.depth_m(a0)) / (2 * f)
+            else:
+                a = float(self.volume.true_radius_m(w_app * z0 / (2 * f)))
             # de-duplicate against drops counted in the last frames
-            ux = dx / T
-            uy = mot / T
             dup = False
             for r in self._recent:
                 dt = t - r["t"]
@@ -327,14 +360,12 @@ class RainGauge:
                     continue
                 px = r["x"] + r["ux"] * dt
                 py = r["y"] + r["uy"] * dt
-                tol = 3.0 + 0.04 * abs(r["uy"] * dt)
                 if abs(px - xc) <= max(2.0, 0.5 * w_app + 1.5 + 0.02 * abs(r["uy"] * dt)) and \
-                        abs(py - yc) <= tol and 0.6 < (w_app + 1) / (r["w"] + 1) < 1.6:
+                        abs(py - yc) <= 3.0 + 0.04 * abs(r["uy"] * dt) and 0.6 < (w_app + 1) / (r["w"] + 1) < 1.6:
                     dup = True
                     break
             if dup:
                 continue
-            a = float(self.volume.true_radius_m(a_app))
             kap = float(self.volume.kappa(a))
             area = float(effective_area_rate_px2_s((dx, mot), w_app, prof.shape, exposure_s=T,
                                                    frame_interval_s=self._frame_interval))
@@ -344,7 +375,7 @@ class RainGauge:
             z = float(self.volume.depth_m(a))
             v = mot * z / (f * T)
             weight = 1.0 / (kap * area)
-            d = {"t": t, "x": xc, "y": yc, "ux": ux, "uy": uy, "w": w_app, "diameter_m": 2 * a,
+            d = {"t": t, "x": xc, "y": yc, "ux": dx / T, "uy": mot / T, "w": w_app, "diameter_m": 2 * a,
                  "velocity_m_s": v, "weight_s_m3": weight, "blur_px": sp.blur_px, "width_px": sp.width_px,
                  "apparent_width_px": w_app, "motion_px": mot,
                  "accum_mm": 1e3 * math.pi / 6 * (2 * a) ** 3 * v * weight}

@@ -36,6 +36,10 @@ __all__ = [
     "DEFAULT_BLUR_SIGMA_PX",
     "max_blur_px",
     "passes_blur",
+    "photometric_focus",
+    "exposure_area_px2",
+    "q_sigma",
+    "DEFAULT_Q_MIN",
 ]
 
 #: Spread of real drop speeds about the law that is always tolerated (ln units, ~8 %).
@@ -186,3 +190,60 @@ def passes_blur(blur_px, width_px, *, floor_px: float = DEFAULT_BLUR_FLOOR_PX,
     """
     b = np.asarray(blur_px, dtype=float)
     return np.isfinite(b) & (b <= max_blur_px(width_px, floor_px=floor_px, relative=relative))
+
+
+#: Smallest photometric focus q = (w / w')^2 accepted (the blur is then under 0.29 w).
+DEFAULT_Q_MIN = 0.6
+#: Relative standard error of a streak's total signal [-].
+DEFAULT_SIGNAL_REL_SIGMA = 0.06
+
+
+def exposure_area_px2(plateau, motion_px, width_px) -> np.ndarray:
+    """Total change of a uniform streak, Q = P (L_m + pi w' / 4) [gray levels px^2].
+
+    A uniform streak (Eqs. 17, 23) is a capsule of width w' around a motion
+    L_m with the constant change beta (E_r - E_b), beta = pi a_i^2 / A_capsule;
+    its row sums have the plateau P = beta (E_r - E_b) w', so the total
+    change is P A_capsule / w' = pi a_i^2 (E_r - E_b): the drop's own image area
+    times its contrast, whatever the defocus.
+
+    Parameters
+    ----------
+    plateau : array_like
+        Row-sum plateau P [gray levels px].
+    motion_px : array_like
+        Motion L_m [px].
+    width_px : array_like
+        Apparent width w' [px].
+    """
+    return np.asarray(plateau) * (np.asarray(motion_px) + math.pi * np.asarray(width_px) / 4.0)
+
+
+def photometric_focus(total_change, width_px, contrast_dn) -> np.ndarray:
+    """q = (2 a_i / w')^2 = 4 Q / (pi C w'^2): how much of the streak's width is the drop's own.
+
+    With the uniform spreading of Eq. (24) [GargNayar2007] a defocused drop's
+    change is the focused one times w / (w + b_c); its total change Q is the
+    drop's image area times the contrast C = E_r - E_b, so the focused width
+    is 2 a_i = 2 sqrt(Q / (pi C)) and q = 1 in focus, (w / (w + b_c))^2 out of it.
+
+    Parameters
+    ----------
+    total_change : array_like
+        Q [gray levels px^2] (:func:`exposure_area_px2`).
+    width_px : array_like
+        Apparent width w' [px].
+    contrast_dn : array_like
+        Drop contrast C = E_r - E_b [gray levels] (estimated from the sharpest drops).
+    """
+    w = np.maximum(np.asarray(width_px, dtype=float), 1e-3)
+    c = np.asarray(contrast_dn, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(c > 0, 4.0 * np.asarray(total_change) / (math.pi * c * w * w), np.nan)
+
+
+def q_sigma(q, width_px, *, width_sigma_px: float = DEFAULT_WIDTH_SIGMA_PX,
+            signal_rel_sigma: float = DEFAULT_SIGNAL_REL_SIGMA) -> np.ndarray:
+    """Standard error of q from the errors of the total change and of the width [-]."""
+    w = np.maximum(np.asarray(width_px, dtype=float), 0.3)
+    return np.maximum(np.asarray(q) * np.sqrt(signal_rel_sigma ** 2 + (2 * width_sigma_px / w) ** 2), 1e-3)

@@ -57,9 +57,10 @@ __all__ = [
     "SHARP_SIGMA_PX",
 ]
 
-#: Standard deviation of a sharp streak edge [px]: the pixel's box (1/12 px^2)
-#: with a small optical spread; the floor of the fitted blur s.
-SHARP_SIGMA_PX = math.sqrt(1.0 / 12.0)
+#: Standard deviation of a sharp streak edge beyond the pixel's own box [px]:
+#: a small optical spread, the floor of the fitted blur s (the pixel box is
+#: modelled exactly).
+SHARP_SIGMA_PX = 0.1
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(12)
 
@@ -218,6 +219,7 @@ def _lm_batch(model, p0, lo, hi, y, wts, *, iters: int = 16):
         rn = resid(pn)
         cn = np.einsum("bk,bk->b", rn, rn)
         better = cn < cost
+        gain = np.where(better, (cost - cn) / np.maximum(cost, 1e-300), 0.0)
         if np.any(better):
             p[better] = pn[better]
             r[better] = rn[better]
@@ -225,6 +227,9 @@ def _lm_batch(model, p0, lo, hi, y, wts, *, iters: int = 16):
             jac_new = jacobian(p, r)
             jac[better] = jac_new[better]
         lam = np.where(better, np.maximum(lam / 5, 1e-7), np.minimum(lam * 8, 1e8))
+        # done when no problem still improves noticeably (or all are stuck at large damping)
+        if np.all((gain < 1e-5) & (better | (lam > 1e3))):
+            break
     return p, jac, r
 
 
@@ -238,6 +243,7 @@ def _param_errors(jac, r, dof):
 
 def _chord_gauss_batch(xi, params):
     amp, cen, w, s = (params[:, k][:, None, None] for k in range(4))
+    s = np.sqrt(s * s + 1.0 / 12.0)          # the pixel's box, as a Gaussian
     x = xi[None, :, None] - cen
     half = 0.5 * w
     u = half * _GL_X[None, None, :]
@@ -246,13 +252,21 @@ def _chord_gauss_batch(xi, params):
     return (amp[..., 0] * half[..., 0]) * np.sum(_GL_W * chord * g, axis=-1)
 
 
-def _box_gauss_batch(xi, params):
+def _erf_antiderivative(t):
     from scipy.special import erf
 
+    return t * erf(t) + np.exp(-t * t) / math.sqrt(math.pi)
+
+
+def _box_gauss_batch(xi, params):
+    """Box of width w, convolved with a Gaussian s and integrated over the pixel (B, K)."""
     amp, cen, w, s = (params[:, k][:, None] for k in range(4))
     x = (xi if np.ndim(xi) == 2 else xi[None, :]) - cen
     k = 1.0 / (math.sqrt(2.0) * s)
-    return 0.5 * amp * (erf((x + 0.5 * w) * k) - erf((x - 0.5 * w) * k))
+    g = _erf_antiderivative
+    hw = 0.5 * w
+    acc = (g((x + 0.5 + hw) * k) - g((x - 0.5 + hw) * k) - g((x + 0.5 - hw) * k) + g((x - 0.5 - hw) * k))
+    return 0.5 * amp * acc / k
 
 
 def box_gauss_profile(xi, *, amplitude: float, centre: float, width: float, sigma: float):
@@ -365,7 +379,7 @@ def fit_cross_profiles(data, *, sigma_min: float = SHARP_SIGMA_PX, shape: str = 
             continue
         c0 = float(np.sum(pos * xi) / total)
         var0 = float(np.sum(pos * (xi - c0) ** 2) / total)
-        w0 = max(math.sqrt(var_k * max(var0 - sigma_min ** 2, 0.04)), 0.6)
+        w0 = max(math.sqrt(var_k * max(var0 - 1.0 / 12.0 - sigma_min ** 2, 0.04)), 0.6)
         step = float(np.median(np.diff(np.sort(xi))))
         a0 = max(total * step / ((1.0 if shape == "uniform" else math.pi / 4) * w0), 1e-3)
         rows.append((i, xi, y, wts, [a0, c0, w0, sigma_min * 1.2],
@@ -923,6 +937,18 @@ class StreakProps:
         """Row of the drop centre at the start of the exposure [px]."""
         fit = self.along_fit
         return float("nan") if fit is None else fit["top"]
+
+    @cached_property
+    def background_dn(self) -> float:
+        """Mean background I_b under the streak, (I_{n-1} + I_{n+1}) / 2 [gray levels]."""
+        if self._cur is None:
+            return float("nan")
+        x0, y0, img, own, other = self._crop
+        h, w = img.shape
+        cur = self._cur[y0:y0 + h, x0:x0 + w].astype(np.float64)
+        if not own.any():
+            return float("nan")
+        return float(np.mean((cur - img)[own]))
 
     @cached_property
     def beta_fit(self) -> tuple[float, float] | None:

@@ -39,11 +39,13 @@ from raingauge.gauge.rejection import (
     DEFAULT_BLUR_RELATIVE,
     DEFAULT_BLUR_SIGMA_PX,
     DEFAULT_K_SIGMA,
+    DEFAULT_Q_MIN,
     DEFAULT_MOTION_SIGMA_PX,
     DEFAULT_TOLERANCE_FLOOR,
     DEFAULT_WIDTH_SIGMA_PX,
     law_tolerance,
     max_blur_px,
+    q_sigma,
     ratio_sigma,
     velocity_log_ratio,
 )
@@ -73,7 +75,8 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
                      k_sigma: float = DEFAULT_K_SIGMA, width_sigma_px: float = DEFAULT_WIDTH_SIGMA_PX,
                      motion_sigma_px: float = DEFAULT_MOTION_SIGMA_PX, blur_variance_factor: float = 1.0,
                      blur_floor_px: float = DEFAULT_BLUR_FLOOR_PX, blur_relative: float = DEFAULT_BLUR_RELATIVE,
-                     blur_sigma_px: float = DEFAULT_BLUR_SIGMA_PX, defocus_model: str = "uniform") -> dict:
+                     blur_sigma_px: float = DEFAULT_BLUR_SIGMA_PX, defocus_model: str = "uniform",
+                     q_min: float = DEFAULT_Q_MIN) -> dict:
     """Probability that a drop of radius a at depth z passes the defocus test.
 
     Parameters
@@ -94,8 +97,9 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
         (``"pillbox"`` only).
     defocus_model : str
         ``"uniform"``: the paper's Eqs. (23)-(24), the drop's change spread
-        evenly over a streak w + b wide (w' = w + b; edges stay sharp, so the
-        velocity law alone rejects defocus).  ``"pillbox"``: convolution with
+        evenly over a streak w + b wide (w' = w + b; edges stay sharp): the
+        velocity law and the photometric focus q = (w / w')^2 >= ``q_min``
+        reject defocus (:func:`raingauge.gauge.rejection.photometric_focus`).  ``"pillbox"``: convolution with
         the blur circle (w'^2 = w^2 + factor b^2, soft edges, the blur test applies).
     blur_variance_factor : float
         w'^2 = w^2 + factor b^2 (1 for a pillbox blur) [-].
@@ -134,6 +138,9 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
     if defocus_model == "pillbox":
         bmax = max_blur_px(w, floor_px=blur_floor_px, relative=blur_relative)
         p = p * ndtr((bmax - np.sqrt(blur_variance_factor) * b) / blur_sigma_px)
+    else:
+        q = (2.0 * f * radius_m / z / w_app) ** 2
+        p = p * ndtr((q - q_min) / q_sigma(q, w_app))
     if not np.isfinite(v_true):
         p = np.zeros_like(z)
     return {"p": p, "apparent_radius_m": a_app, "apparent_velocity_m_s": v_app, "width_px": w,
@@ -241,6 +248,7 @@ class SampleVolume:
     k_sigma: float = DEFAULT_K_SIGMA
     blur_variance_factor: float = 1.0
     defocus_model: str = "uniform"
+    q_min: float = DEFAULT_Q_MIN
     radii_m: np.ndarray = field(default_factory=lambda: np.geomspace(0.1e-3, 4.0e-3, 80))
     min_width_px: float = 1.0
 
@@ -255,7 +263,7 @@ class SampleVolume:
             res = pass_probability(a, z, prof, velocity_model=self.velocity_model,
                                    rain_velocity_model=self.rain_velocity_model, floor=self.floor,
                                    k_sigma=self.k_sigma, blur_variance_factor=self.blur_variance_factor,
-                                   defocus_model=self.defocus_model)
+                                   defocus_model=self.defocus_model, q_min=self.q_min)
             wt = res["p"] * (z / f) ** 2 * dz
             k = float(wt.sum())
             kap.append(k)
@@ -298,7 +306,7 @@ class SampleVolume:
         p = pass_probability(radius_m, z, self.profile, velocity_model=self.velocity_model,
                              rain_velocity_model=self.rain_velocity_model, floor=self.floor,
                              k_sigma=self.k_sigma, blur_variance_factor=self.blur_variance_factor,
-                                   defocus_model=self.defocus_model)["p"]
+                                   defocus_model=self.defocus_model, q_min=self.q_min)["p"]
         ok = np.nonzero(p >= p_min)[0]
         if ok.size == 0:
             return (z0, z0)

@@ -92,6 +92,16 @@ def _finite(v) -> bool:
         return False
 
 
+def _raining(rec: dict[str, Any]) -> bool:
+    """Rain seen in a record: intensity class above "none" (else a positive rate)."""
+    if rec.get("missing"):
+        return False
+    code = rec.get("intensity_class")
+    if _finite(code):
+        return int(code) > 0
+    return _finite(rec.get("rain_rate_mm_h")) and rec["rain_rate_mm_h"] > 0
+
+
 def instrument_record(gauge_record: dict[str, Any], *, wall_t0: float, profile, window_s: float) -> dict[str, Any]:
     """Map a gauge record (keys of the :class:`raingauge.gauge.RainGauge` contract) to an instrument record.
 
@@ -157,6 +167,10 @@ class HistoryWriter:
             self._backlog.append((record, settings))
             self._cv.notify()
 
+    def put_settings(self, settings: dict[str, Any]) -> None:
+        """Store settings in order with the records queued before them."""
+        self.put(None, settings)
+
     def pending(self) -> int:
         with self._cv:
             return len(self._backlog)
@@ -172,7 +186,10 @@ class HistoryWriter:
                     return
                 record, settings = self._backlog[0]
             try:
-                self.history.append(record, settings=settings)
+                if record is None:
+                    self.history.set_settings(**settings)
+                else:
+                    self.history.append(record, settings=settings)
             except StorageFull as exc:
                 if not self.fault:
                     log.error("history: %s; records are kept in memory and written when there is room", exc)
@@ -193,7 +210,8 @@ class HistoryWriter:
                 continue
             with self._cv:
                 self._backlog.popleft()
-            self.written += 1
+            if record is not None:
+                self.written += 1
             if self.fault:
                 log.info("history: writing again")
             self.fault = False
@@ -417,16 +435,13 @@ class Instrument:
         self.accumulator.reset()
         log.info("accumulation reset")
         if self.history_writer is not None:
-            try:
-                self.history_writer.history.set_settings(**self.accumulator.state())
-            except Exception as exc:  # noqa: BLE001 - the next record stores the state anyway
-                log.warning("could not store the reset at once: %s", exc)
+            self.history_writer.put_settings(self.accumulator.state())
 
     # ------------------------------------------------------------------ status
     def status(self, record: dict | None = None) -> int:
         storage_fault = bool(self.history_writer and self.history_writer.fault)
         output_fault = self.output_errors > 0 or any(bool(getattr(o, "fault", False)) for o in self.outputs)
-        rain = bool(record and _finite(record.get("rain_rate_mm_h")) and record["rain_rate_mm_h"] > 0)
+        rain = bool(record and _raining(record))
         low = bool(record and (record.get("quality") or record.get("missing")))
         return status_word(camera_ok=self._camera_ok, rain_detected=rain, low_confidence=low,
                            calibrated=self.calibrated, storage_fault=storage_fault, output_fault=output_fault)
@@ -448,7 +463,7 @@ class Instrument:
                 depth = float(rec["rain_rate_mm_h"]) * step / 3600.0
             else:
                 depth = 0.0
-            raining = _finite(rec.get("rain_rate_mm_h")) and rec["rain_rate_mm_h"] > 0
+            raining = _raining(rec)
             acc, dur = self.accumulator.add(depth, step if raining else 0.0)
         else:
             rec.pop("_gauge_accumulation_mm", None)
@@ -536,7 +551,6 @@ class Instrument:
         g.start()
         lost = False
         last_frame_wall = time.monotonic()
-        started_wall = time.monotonic()
         try:
             while not self._stop.is_set():
                 if time.monotonic() >= self._next_status_check:
@@ -561,8 +575,6 @@ class Instrument:
                             self._emit_missing(now_s)
                         if duration_s is not None and now_s >= duration_s:
                             break
-                    elif duration_s is not None and time.monotonic() - started_wall > duration_s + 60:
-                        break
                     continue
                 t_s, frame = item
                 if duration_s is not None and t_s > duration_s:

@@ -17,6 +17,7 @@ Specifications accepted by :func:`open_source`::
 
     simulate:10          simulated rain at 10 mm/h (real time, or as fast as possible)
     0, 1, ...            OpenCV device index
+    /dev/video0          a camera device node (or a udev symlink to one)
     rtsp://..., http://..., https://...   network stream
     /path/clip.mkv       video file
     /path/frames/        folder of images, in name order
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import logging
 import queue
+import stat
 import threading
 import time
 from pathlib import Path
@@ -253,6 +255,8 @@ def open_source(spec: str, *, profile, realtime: bool = True, seed: int = 0) -> 
     if spec.lower().startswith(_STREAM_PREFIXES):
         return CameraSource(spec, frame_rate_hz=profile.frame_rate_hz)
     path = Path(spec).expanduser()
+    if path.exists() and stat.S_ISCHR(path.stat().st_mode):
+        return CameraSource(str(path), frame_rate_hz=profile.frame_rate_hz)   # /dev/video0, udev symlink
     if path.exists():
         return FileSource(path, frame_rate_hz=profile.frame_rate_hz, realtime=realtime)
     raise InputError(

@@ -391,8 +391,9 @@ def normal_theta_from_refraction(theta_r, mu=MU_WATER):
     ndarray
         theta_n in [pi/2, pi] [rad]; NaN where theta_r lies outside the drop's field of view.
     """
-    t = np.asarray(theta_r, dtype=float)
+    t_in = np.asarray(theta_r, dtype=float)
     half_fov = 0.5 * drop_field_of_view(mu)
+    t = np.clip(t_in, 0.0, half_fov)
     lo = np.zeros_like(t)
     hi = np.full_like(t, 0.5 * np.pi)
     for _ in range(60):
@@ -402,7 +403,7 @@ def normal_theta_from_refraction(theta_r, mu=MU_WATER):
         lo = np.where(below, mid, lo)
         hi = np.where(below, hi, mid)
     i = 0.5 * (lo + hi)
-    bad = (t < 0) | (t > half_fov + 1e-12)
+    bad = (t_in < -1e-12) | (t_in > half_fov + 1e-12) | ~np.isfinite(t_in)
     return np.where(bad, np.nan, np.pi - i)
 
 

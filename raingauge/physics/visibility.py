@@ -85,7 +85,6 @@ Notes
 from __future__ import annotations
 
 import math
-from typing import Callable
 
 import numpy as np
 
@@ -526,15 +525,12 @@ def visibility_g_cases(radius_m=A_REF_M, *, focal_length_px, f_number, focus_dis
     def y_prime(z):
         return (1.0 + h / z0) * z - h
 
-    def log_term(coef_inv, d_hi, d_lo):
-        # f / alpha * ln(D_hi / D_lo), with the alpha -> 0 limit handled by the caller
-        return f / coef_inv * math.log(d_hi / d_lo)
-
     def far_before(z_lo, z_hi):
+        # f / (1 - H/z0) ln(Y(z_hi) / Y(z_lo)); f (z_hi - z_lo) / H when H = z0
         alpha = 1.0 - h / z0
         if abs(alpha) < 1e-12:
             return f * (z_hi - z_lo) / h
-        return log_term(alpha, y(z_hi), y(z_lo))
+        return f / alpha * math.log(y(z_hi) / y(z_lo))
 
     if z0 > zr:  # case 1
         return f * z0 / h * math.log(x(z1) / x(zm)) + far_before(zm, zr)

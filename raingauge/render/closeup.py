@@ -182,7 +182,8 @@ class CloseupStreak:
 
     radiance : float32 (H, W)  time-averaged radiance contributed by the drop.
     coverage : float32 (H, W)  fraction of the exposure the drop covers each pixel.
-    fall_px : float            distance the drop's centre moves during the exposure [px].
+    fall_px : float            distance the drop's centre moves during the exposure [px]
+                               (the requested length rounded to the time lattice).
     period_px : float          fall distance per oscillation period [px].
     frequency_hz : float       oscillation frequency [Hz].
     fall_speed_m_s : float     fall speed [m/s].
@@ -224,7 +225,8 @@ def closeup_streak(radius_m: float, *, length_px: float, width_px: float,
                    shape: str = "beard_chuang", environment=None, light_radiance: float = 1.0,
                    ambient: float = 0.05, light_size_rad: float = math.radians(3.0),
                    mu: float = optics.MU_WATER, supersample: int = 2,
-                   time_samples_per_px: float = 1.0, start_time_s: float = 0.0) -> CloseupStreak:
+                   time_samples_per_px: float | None = None,
+                   start_time_s: float = 0.0) -> CloseupStreak:
     """Render a close-up rain streak of an oscillating drop (Sec. 9 [GargNayar2007], [GargNayar2006]).
 
     Parameters
@@ -233,8 +235,9 @@ def closeup_streak(radius_m: float, *, length_px: float, width_px: float,
         Radius a of the volume-equivalent sphere [m].
     length_px, width_px : float
         Streak length and drop image diameter 2a [px] (see module notes).
-    light_dir : (theta, phi) or None
-        Direction of the light [rad] (module notes); None: ambient / map only.
+    light_dir : (theta, phi), (3,) or None
+        Direction of the light: angles [rad] (module notes) or a world-frame vector
+        towards the light; None: ambient / map only.
     view_theta : float
         Elevation of the line of sight below the horizontal [rad].
     exposure_s, fall_speed_m_s : float, optional
@@ -256,9 +259,10 @@ def closeup_streak(radius_m: float, *, length_px: float, width_px: float,
     mu : float
         Refractive index [-].
     supersample : int
-        s x s rays per pixel and instant.
-    time_samples_per_px : float
-        Instants per pixel of fall [-].
+        Rays per pixel across the streak, per instant [-].
+    time_samples_per_px : float, optional
+        Instants per pixel of fall (default 2 x supersample); the motion itself
+        samples each pixel along the streak [-].
     start_time_s : float
         Time at the start of the exposure (oscillation phase) [s].
 
@@ -296,7 +300,16 @@ def closeup_streak(radius_m: float, *, length_px: float, width_px: float,
         exposure_s = float(exposure_s) if exposure_s is not None else 0.0
     period_px = speed * foreshortening * scale / drop.frequency_hz
 
-    ldir = None if light_dir is None else light_direction(light_dir[0], light_dir[1], view_theta)
+    if light_dir is None:
+        ldir = None
+    else:
+        ld = np.asarray(light_dir, dtype=float).ravel()
+        if ld.size == 2:
+            ldir = light_direction(ld[0], ld[1], view_theta)
+        elif ld.size == 3 and np.linalg.norm(ld) > 0:
+            ldir = ld / np.linalg.norm(ld)
+        else:
+            raise ValueError("light_dir must be (theta, phi) [rad] or a non-zero world vector (3,)")
     scene = light_scene(ldir, light_radiance=light_radiance, ambient=ambient,
                         light_size_rad=light_size_rad, environment=environment,
                         view_theta=view_theta)
@@ -305,13 +318,21 @@ def closeup_streak(radius_m: float, *, length_px: float, width_px: float,
     w = int(math.ceil(width_px * drop.max_radius_m / radius_m)) + 2
     cx = (w - 1) / 2.0
     y_start = 1.0 + width_px / 2.0 - 0.5                   # centre row at t = 0
-    n_t = max(1, int(math.ceil(fall_px * time_samples_per_px)))
-    frac = (np.arange(n_t) + 0.5) / n_t
-    times = start_time_s + frac * exposure_s
-    centres = y_start + frac * fall_px
+    # instants on a lattice of exactly 1/rate px of fall: every row then sees the drop
+    # at the same sub-pixel phases, so the time average has no beat along the streak
+    rate = float(time_samples_per_px) if time_samples_per_px else 2.0 * int(supersample)
+    if not rate > 0:
+        raise ValueError(f"time_samples_per_px must be > 0, got {time_samples_per_px}")
+    n_t = max(1, int(round(fall_px * rate)))
+    centres = y_start + (np.arange(n_t) + 0.5) / rate if fall_px > 0 else np.full(1, y_start)
+    v_img = scale * foreshortening * speed                 # px/s
+    times = start_time_s + (centres - y_start) * (0.0 if fall_px <= 0 else 1.0 / v_img)
+    if fall_px > 0:
+        fall_px = n_t / rate
+        exposure_s = fall_px / v_img
     r_px = drop.max_radius_m * scale
     sub = _subpixel_offsets(supersample)
-    k = sub.size ** 2
+    k = sub.size                                           # sub-columns; rows via the motion
     radiance = np.zeros(h * w)
     coverage = np.zeros(h * w)
     cols = np.arange(w)
@@ -322,16 +343,16 @@ def closeup_streak(radius_m: float, *, length_px: float, width_px: float,
         for j in range(b0, min(n_t, b0 + per_batch)):
             r0 = max(0, int(math.floor(centres[j] - r_px - 1)))
             r1 = min(h, int(math.ceil(centres[j] + r_px + 2)))
-            rr, cc, sy, sx = np.meshgrid(np.arange(r0, r1), cols, sub, sub, indexing="ij")
+            rr, cc, sx = np.meshgrid(np.arange(r0, r1), cols, sub, indexing="ij")
             xs.append(((cc + sx) - cx).ravel() / scale)
-            ys.append(((rr + sy) - centres[j]).ravel() / scale)
+            ys.append((rr - centres[j]).ravel() / scale)
             ts.append(np.full(rr.size, times[j]))
             pix.append((rr * w + cc).ravel())
         x_m, y_m, t_s, p = (np.concatenate(v) for v in (xs, ys, ts, pix))
         rad, hit = _trace_drop_samples(drop, x_m, y_m, t_s, view_theta=view_theta,
                                        scene=scene, mu=mu)
-        np.add.at(radiance, p, rad)
-        np.add.at(coverage, p, hit.astype(float))
+        radiance += np.bincount(p, weights=rad, minlength=h * w)
+        coverage += np.bincount(p, weights=hit.astype(float), minlength=h * w)
     norm = 1.0 / (k * n_t)
     return CloseupStreak(radiance=(radiance * norm).reshape(h, w).astype(np.float32),
                          coverage=(coverage * norm).reshape(h, w).astype(np.float32),

@@ -377,6 +377,7 @@ def drop_to_perspective(image, *, center_xy, radius_px: float, fov_deg: float = 
     out = cv2.remap(src, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                     borderValue=0)
     if flatten:
-        gain = 1.0 / optics.transfer_refraction(np.pi - theta_n, mu)
+        # R falls to 0 at grazing incidence: cap the gain at 10 (R >= 0.1)
+        gain = 1.0 / np.maximum(optics.transfer_refraction(np.pi - theta_n, mu), 0.1)
         out = out * (gain[..., None] if out.ndim == 3 else gain)
     return out.astype(np.float32)

@@ -440,88 +440,90 @@ def visible_depth_range(diameter_m, velocity_m_s, *, focal_length_px, exposure_s
 
 
 # ============================================================================ the rain volume
-class _Region:
-    """Convex region z in [z0, z1], x in [sx0 z + ox0, sx1 z + ox1], y in [sy0 z + oy0, sy1 z + oy1]."""
+class _Regions:
+    """Convex generation regions, one per diameter bin (arrays over bins).
+
+    Region b: z in [z0, z1], x in [sx0 z + ox0, sx1 z + ox1], y in [sy0 z + oy0, sy1 z + oy1]
+    (a slice of the viewing frustum widened by a margin, or a box when the slopes are 0).
+    """
 
     def __init__(self, z0, z1, sx0, ox0, sx1, ox1, sy0, oy0, sy1, oy1):
-        self.z0, self.z1 = float(z0), float(z1)
-        self.sx0, self.ox0, self.sx1, self.ox1 = sx0, ox0, sx1, ox1
-        self.sy0, self.oy0, self.sy1, self.oy1 = sy0, oy0, sy1, oy1
-        # half-spaces n . p <= c
-        self.normals = np.array([
-            [0.0, 0.0, -1.0], [0.0, 0.0, 1.0],
-            [-1.0, 0.0, sx0], [1.0, 0.0, -sx1],
-            [0.0, -1.0, sy0], [0.0, 1.0, -sy1]])
-        self.offsets = np.array([-self.z0, self.z1, -ox0, ox1, -oy0, oy1])
-        self.dxs, self.dxo = sx1 - sx0, ox1 - ox0
-        self.dys, self.dyo = sy1 - sy0, oy1 - oy0
-        self.volume = self._int_area(self.z0, self.z1)
-
-    def _int_area(self, za, zb):
-        # integral of (dxs z + dxo)(dys z + dyo) dz
+        arr = lambda v: np.asarray(v, dtype=np.float64) * np.ones(np.shape(z0))  # noqa: E731
+        self.z0, self.z1 = arr(z0), arr(z1)
+        self.sx0, self.ox0, self.sx1, self.ox1 = arr(sx0), arr(ox0), arr(sx1), arr(ox1)
+        self.sy0, self.oy0, self.sy1, self.oy1 = arr(sy0), arr(oy0), arr(sy1), arr(oy1)
+        k = self.z0.size
+        one, zero = np.ones(k), np.zeros(k)
+        # half-spaces n . p <= c: near, far, left, right, top, bottom
+        self.normals = np.stack([
+            np.stack([zero, zero, -one], 1), np.stack([zero, zero, one], 1),
+            np.stack([-one, zero, self.sx0], 1), np.stack([one, zero, -self.sx1], 1),
+            np.stack([zero, -one, self.sy0], 1), np.stack([zero, one, -self.sy1], 1)], axis=1)   # (K, 6, 3)
+        self.offsets = np.stack([-self.z0, self.z1, -self.ox0, self.ox1, -self.oy0, self.oy1], axis=1)
+        self.dxs, self.dxo = self.sx1 - self.sx0, self.ox1 - self.ox0
+        self.dys, self.dyo = self.sy1 - self.sy0, self.oy1 - self.oy0
+        za, zb = self.z0, self.z1
         p2, p1, p0 = self.dxs * self.dys, self.dxs * self.dyo + self.dys * self.dxo, self.dxo * self.dyo
-        return (p2 / 3 * (zb ** 3 - za ** 3) + p1 / 2 * (zb ** 2 - za ** 2) + p0 * (zb - za))
+        self.volume = p2 / 3 * (zb ** 3 - za ** 3) + p1 / 2 * (zb ** 2 - za ** 2) + p0 * (zb - za)
+        zlen = zb - za
+        int_dy = self.dys / 2 * (zb ** 2 - za ** 2) + self.dyo * zlen
+        int_dx = self.dxs / 2 * (zb ** 2 - za ** 2) + self.dxo * zlen
+        near = (self.dxs * za + self.dxo) * (self.dys * za + self.dyo)
+        far = (self.dxs * zb + self.dxo) * (self.dys * zb + self.dyo)
+        #: per face F with inflow rate = density x F x max(0, -v . n)  (|n| cancels the slant)
+        self.face_measure = np.stack([near, far, int_dy, int_dy, int_dx, int_dx], axis=1)   # (K, 6)
 
-    def face_measures(self):
-        """Per face: the factor F with inflow rate = density x F x max(0, -v . n)."""
-        zlen = self.z1 - self.z0
-        int_dy = self.dys / 2 * (self.z1 ** 2 - self.z0 ** 2) + self.dyo * zlen
-        int_dx = self.dxs / 2 * (self.z1 ** 2 - self.z0 ** 2) + self.dxo * zlen
-        near = (self.dxs * self.z0 + self.dxo) * (self.dys * self.z0 + self.dyo)
-        far = (self.dxs * self.z1 + self.dxo) * (self.dys * self.z1 + self.dyo)
-        return np.array([near, far, int_dy, int_dy, int_dx, int_dx])
-
-    def _linear_z(self, alpha, beta, u):
-        """Depths with density proportional to alpha z + beta on [z0, z1], from uniforms u."""
-        z0, z1 = self.z0, self.z1
+    @staticmethod
+    def _linear_z(z0, z1, alpha, beta, u):
+        """Depths with density proportional to alpha z + beta on [z0, z1] (arrays), from uniforms u."""
         total = alpha / 2 * (z1 ** 2 - z0 ** 2) + beta * (z1 - z0)
-        if abs(alpha) * (z1 - z0) < 1e-9 * max(abs(beta), 1e-300) or total <= 0:
-            return z0 + u * (z1 - z0)
         c = alpha / 2 * z0 ** 2 + beta * z0 + u * total
-        return (-beta + np.sqrt(np.maximum(beta * beta + 2 * alpha * c, 0.0))) / alpha
+        flat = np.abs(alpha) * (z1 - z0) < 1e-9 * np.maximum(np.abs(beta), 1e-300)
+        safe = np.where(flat, 1.0, alpha)
+        z = (-beta + np.sqrt(np.maximum(beta * beta + 2 * alpha * c, 0.0))) / safe
+        return np.clip(np.where(flat, z0 + u * (z1 - z0), z), z0, z1)
 
-    def sample_inside(self, count, rng):
-        out = np.empty((count, 3))
-        filled = 0
-        amax = (self.dxs * self.z1 + self.dxo) * (self.dys * self.z1 + self.dyo)
-        while filled < count:
-            k = max(16, int(1.3 * (count - filled) * amax * (self.z1 - self.z0) / max(self.volume, 1e-300)))
-            z = rng.uniform(self.z0, self.z1, size=k)
-            acc = rng.uniform(0, amax, size=k) < (self.dxs * z + self.dxo) * (self.dys * z + self.dyo)
-            z = z[acc][: count - filled]
-            kk = z.size
-            x = self.sx0 * z + self.ox0 + rng.uniform(size=kk) * (self.dxs * z + self.dxo)
-            y = self.sy0 * z + self.oy0 + rng.uniform(size=kk) * (self.dys * z + self.dyo)
-            out[filled:filled + kk] = np.stack([x, y, z], axis=1)
-            filled += kk
+    def sample_inside(self, bins, rng):
+        """Uniform points inside the regions of ``bins`` (one per entry)."""
+        out = np.empty((bins.size, 3))
+        todo = np.arange(bins.size)
+        while todo.size:
+            b = bins[todo]
+            z = rng.uniform(self.z0[b], self.z1[b])
+            amax = (self.dxs[b] * self.z1[b] + self.dxo[b]) * (self.dys[b] * self.z1[b] + self.dyo[b])
+            area = (self.dxs[b] * z + self.dxo[b]) * (self.dys[b] * z + self.dyo[b])
+            acc = rng.uniform(size=b.size) * amax < area
+            b, z, idx = b[acc], z[acc], todo[acc]
+            x = self.sx0[b] * z + self.ox0[b] + rng.uniform(size=b.size) * (self.dxs[b] * z + self.dxo[b])
+            y = self.sy0[b] * z + self.oy0[b] + rng.uniform(size=b.size) * (self.dys[b] * z + self.dyo[b])
+            out[idx] = np.stack([x, y, z], axis=1)
+            todo = todo[~acc]
         return out
 
-    def sample_face(self, face, count, rng):
-        u1, u2 = rng.uniform(size=count), rng.uniform(size=count)
-        if face in (0, 1):
-            z = np.full(count, self.z0 if face == 0 else self.z1)
-            x = self.sx0 * z + self.ox0 + u1 * (self.dxs * z + self.dxo)
-            y = self.sy0 * z + self.oy0 + u2 * (self.dys * z + self.dyo)
-        elif face in (2, 3):
-            z = self._linear_z(self.dys, self.dyo, u1)
-            x = self.sx0 * z + self.ox0 if face == 2 else self.sx1 * z + self.ox1
-            y = self.sy0 * z + self.oy0 + u2 * (self.dys * z + self.dyo)
-        else:
-            z = self._linear_z(self.dxs, self.dxo, u1)
-            y = self.sy0 * z + self.oy0 if face == 4 else self.sy1 * z + self.oy1
-            x = self.sx0 * z + self.ox0 + u2 * (self.dxs * z + self.dxo)
+    def sample_face(self, bins, faces, rng):
+        """Uniform points on face ``faces`` of the regions of ``bins``."""
+        u1, u2 = rng.uniform(size=bins.size), rng.uniform(size=bins.size)
+        b = bins
+        z0, z1 = self.z0[b], self.z1[b]
+        side_x = (faces == 2) | (faces == 3)
+        side_y = (faces == 4) | (faces == 5)
+        zx = self._linear_z(z0, z1, self.dys[b], self.dyo[b], u1)     # side faces: density ~ height
+        zy = self._linear_z(z0, z1, self.dxs[b], self.dxo[b], u1)     # top/bottom: density ~ width
+        z = np.where(faces == 0, z0, np.where(faces == 1, z1, np.where(side_x, zx, zy)))
+        xlo, dx = self.sx0[b] * z + self.ox0[b], self.dxs[b] * z + self.dxo[b]
+        ylo, dy = self.sy0[b] * z + self.oy0[b], self.dys[b] * z + self.dyo[b]
+        x = np.where(side_x, np.where(faces == 2, xlo, xlo + dx), xlo + np.where(side_y, u2, u1) * dx)
+        y = np.where(side_y, np.where(faces == 4, ylo, ylo + dy), ylo + u2 * dy)
         return np.stack([x, y, z], axis=1)
 
-    def exit_after(self, points, vel):
-        """Time until each point, moving at ``vel``, leaves the region [s]."""
-        nv = vel @ self.normals.T                       # (n, 6)
-        gap = self.offsets[None, :] - points @ self.normals.T
+    def exit_after(self, bins, points, vel):
+        """Time until each point of ``bins``' regions, moving at ``vel``, leaves it [s]."""
+        n = self.normals[bins]                               # (m, 6, 3)
+        nv = np.einsum("mfk,mk->mf", n, vel)
+        gap = self.offsets[bins] - np.einsum("mfk,mk->mf", n, points)
         with np.errstate(divide="ignore", invalid="ignore"):
             s = np.where(nv > 1e-15, gap / nv, np.inf)
         return np.maximum(s.min(axis=1), 0.0)
-
-    def contains(self, p):
-        return np.all(p @ self.normals.T <= self.offsets[None, :] + 1e-12, axis=1)
 
 
 @dataclasses.dataclass
@@ -613,10 +615,7 @@ class RainVolume:
         return np.stack([np.full(d.size, self.wind[0]), v, np.full(d.size, self.wind[1])], axis=1)
 
     def _add(self, d, pe, vel, te, bins):
-        tx = np.empty(d.size)
-        for b in np.unique(bins):
-            sel = bins == b
-            tx[sel] = te[sel] + self.regions[b].exit_after(pe[sel], vel[sel])
+        tx = te + self.regions.exit_after(bins, pe, vel)
         ids = np.arange(self._next_id, self._next_id + d.size, dtype=np.int64)
         self._next_id += d.size
         self.n_generated += d.size
@@ -626,61 +625,38 @@ class RainVolume:
 
     def _fill_initial(self):
         seg = self._segment_at(0.0)
-        ds, pes, bins = [], [], []
-        for b in range(self.k):
-            lam = seg.n_bin_m3[b] * self.regions[b].volume
-            if lam <= 0:
-                continue
-            c = int(self.rng.poisson(lam))
-            if c == 0:
-                continue
-            pes.append(self.regions[b].sample_inside(c, self.rng))
-            bins.append(np.full(c, b))
-        if not bins:
+        lam = seg.n_bin_m3 * self.regions.volume
+        counts = self.rng.poisson(np.where(lam > 0, lam, 0.0))
+        bins = np.repeat(np.arange(self.k), counts)
+        if bins.size == 0:
             return
-        bins = np.concatenate(bins)
+        pe = self.regions.sample_inside(bins, self.rng)
         d = self._sample_d(seg, bins)
-        self._add(d, np.concatenate(pes), self._velocities(d), np.zeros(d.size), bins)
+        self._add(d, pe, self._velocities(d), np.zeros(d.size), bins)
 
     def _inflow(self, t0, t1):
         seg = self._segment_at(t0)
-        dt = t1 - t0
-        ds, pes, tes, bins = [], [], [], []
         wx, wz = self.wind
-        for b in range(self.k):
-            nb = seg.n_bin_m3[b]
-            if nb <= 0:
-                continue
-            reg = self.regions[b]
-            meas = reg.face_measures()
-            vmax = self.v_max_bin[b]
-            for face in range(6):
-                n = reg.normals[face]
-                # bound of max(0, -v . n) over the bin: v_y in [0, vmax]
-                phi_max = max(0.0, -(wx * n[0] + wz * n[2]) - min(0.0, vmax * n[1]))
-                lam = nb * meas[face] * phi_max * dt
-                if lam <= 0:
-                    continue
-                c = int(self.rng.poisson(lam))
-                if c == 0:
-                    continue
-                bb = np.full(c, b)
-                d = self._sample_d(seg, bb)
-                vel = self._velocities(d)
-                phi = np.maximum(0.0, -(vel @ n))
-                keep = self.rng.uniform(size=c) * phi_max < phi
-                if not np.any(keep):
-                    continue
-                d, vel = d[keep], vel[keep]
-                c = d.size
-                pes.append(reg.sample_face(face, c, self.rng))
-                tes.append(self.rng.uniform(t0, t1, size=c))
-                ds.append(d)
-                bins.append(np.full(c, b))
-        if not ds:
+        n = self.regions.normals                                  # (K, 6, 3)
+        # bound of max(0, -v . n) over each bin: v_y in [0, v_max]
+        phi_max = np.maximum(0.0, -(wx * n[:, :, 0] + wz * n[:, :, 2])
+                             - np.minimum(0.0, self.v_max_bin[:, None] * n[:, :, 1]))
+        lam = seg.n_bin_m3[:, None] * self.regions.face_measure * phi_max * (t1 - t0)
+        counts = self.rng.poisson(np.where(np.isfinite(lam) & (lam > 0), lam, 0.0)).ravel()
+        cand = np.repeat(np.arange(counts.size), counts)
+        if cand.size == 0:
             return
-        d = np.concatenate(ds)
-        self._add(d, np.concatenate(pes), self._velocities(d), np.concatenate(tes), np.concatenate(bins))
+        bins, faces = cand // 6, cand % 6
+        d = self._sample_d(seg, bins)
+        vel = self._velocities(d)
+        phi = np.maximum(0.0, -np.einsum("mk,mk->m", vel, n[bins, faces]))
+        keep = self.rng.uniform(size=cand.size) * phi_max[bins, faces] < phi
+        bins, faces, d, vel = bins[keep], faces[keep], d[keep], vel[keep]
+        if bins.size == 0:
+            return
+        pe = self.regions.sample_face(bins, faces, self.rng)
+        te = self.rng.uniform(t0, t1, size=bins.size)
+        self._add(d, pe, vel, te, bins)
 
     def advance_to(self, t):
         """Generate the drops entering before time ``t`` [s]."""
@@ -782,8 +758,6 @@ class _Sensor:
         np.maximum(x, 0.0, out=x)
         out = cv2.convertScaleAbs(x)   # rounds to nearest, saturates at 255
         if self.jpeg is not None:
-            import cv2
-
             ok, buf = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, int(self.jpeg)])
             out = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)
         return out
@@ -813,7 +787,7 @@ class Simulation:
     """
 
     def __init__(self, profile, *, n_frames, segments, edges, velocity_model, wind, scene,
-                 seed, truth_masks, truth_clean, truth_drops, drop_brightness_dn, render_threshold_dn,
+                 seed, truth_masks, truth_clean, truth_drops, truth_linear, drop_brightness_dn, render_threshold_dn,
                  depth_range_m, reference_depth_m, truth_window_s, jpeg_quality, noise, pixel_pitch_m,
                  assumptions, rain_description, window_edges=None):
         self.profile = profile
@@ -827,6 +801,7 @@ class Simulation:
         self.truth_masks = truth_masks
         self.truth_clean = truth_clean
         self.truth_drops = truth_drops
+        self.truth_linear = truth_linear
         self.e_r = float(drop_brightness_dn)
         self.threshold = float(render_threshold_dn)
         self.pitch = float(pixel_pitch_m)
@@ -873,9 +848,10 @@ class Simulation:
         # generation regions: visible range plus the reference volume
         from raingauge.physics.camera import blur_circle_px
 
-        self.regions = []
-        self.margins = np.zeros(edges.size - 1)
-        for b in range(edges.size - 1):
+        k = edges.size - 1
+        self.margins = np.zeros(k)
+        g0, g1 = np.full(k, zr0), np.full(k, zr1)
+        for b in range(k):
             zl, zh = self.z_lo[b], self.z_hi[b]
             if np.isfinite(zl):
                 zg = np.geomspace(zl, zh, 200)
@@ -883,13 +859,10 @@ class Simulation:
                 bl = blur_circle_px(zg, focal_length_px=f, f_number=profile.f_number,
                                     focus_distance_m=z0, pixel_pitch_m=self.pitch)
                 r_eff = 0.5 * (np.maximum(2 * a_i, 1.0) + bl) + 2.0
-                margin = float(np.max(r_eff * zg / f))
-                g0, g1 = min(zl, zr0), max(zh, zr1)
-            else:
-                margin, g0, g1 = 0.0, zr0, zr1
-            self.margins[b] = margin
-            self.regions.append(_Region(g0, g1, self.sx0, -margin, self.sx1, margin,
-                                        self.sy0, -margin, self.sy1, margin))
+                self.margins[b] = float(np.max(r_eff * zg / f))
+                g0[b], g1[b] = min(zl, zr0), max(zh, zr1)
+        mg = self.margins
+        self.regions = _Regions(g0, g1, self.sx0, -mg, self.sx1, mg, self.sy0, -mg, self.sy1, mg)
         # truth windows
         if window_edges is None:
             w = float(truth_window_s)
@@ -900,6 +873,16 @@ class Simulation:
         self.window_edges = np.asarray(window_edges, dtype=float)
         self._truth = None
         self._children = np.random.SeedSequence(seed).spawn(3)
+
+    @property
+    def reference_box_m(self) -> np.ndarray:
+        """The truth's reference volume, [[x0, x1], [y0, y1], [z0, z1]] in the camera frame [m]."""
+        return self.ref_box.copy()
+
+    @property
+    def reference_volume_m3(self) -> float:
+        """Volume of the reference box [m^3]."""
+        return self.ref_volume
 
     # ---------------------------------------------------------------- helpers
     def _rngs(self):
@@ -1052,6 +1035,28 @@ class Simulation:
             self._truth = self._finish_truth(acc, vol.n_generated)
         return self._truth
 
+    def population(self, times_s) -> Iterator[dict]:
+        """The generated drops alive at each time (ascending), whether drawn or not.
+
+        Yields, per time, a dict of ``id``, ``diameter_m`` (n,), ``position_m``
+        (n, 3) and ``velocity_m_s`` (n, 3): the same drops the frames show (same
+        seed), including those generated only for the reference volume.
+        """
+        rain_rng, _ = self._rngs()
+        vol = self._new_volume(rain_rng)
+        last = -np.inf
+        for t in times_s:
+            t = float(t)
+            if t < last:
+                raise ValueError("population(): times must be ascending")
+            last = t
+            vol.advance_to(t)
+            p = vol.columns
+            live = np.nonzero((p["te"] <= t) & (p["tx"] >= t))[0]
+            yield {"id": p["id"][live], "diameter_m": p["d"][live], "position_m": vol.positions(live, t),
+                   "velocity_m_s": p["vel"][live]}
+            vol.forget_before(t)
+
     # ---------------------------------------------------------------- frames
     def __len__(self):
         return self.n_frames
@@ -1069,7 +1074,7 @@ class Simulation:
             beta, beta_in = render_streaks(shape, caps["p0"], caps["p1"], caps["radius_px"], caps["area_px"])
             bg = self.scene.frame(k)
             lin = compose_rain(bg, beta, drop_brightness_dn=self.e_r)
-            frame = sensor(lin, owned=not self.truth_masks)
+            frame = sensor(lin, owned=not (self.truth_masks or self.truth_linear))
             self._accumulate(acc, vol, k)
             ft: dict[str, Any] = {"index": k, "t_s": k / self.fps}
             if self.truth_drops:
@@ -1081,6 +1086,9 @@ class Simulation:
                     "streak_px": np.stack([caps["p0"], caps["p1"]], axis=1),
                     "depth_m": caps["depth_m"], "width_px": caps["width_px"], "blur_px": caps["blur_px"],
                     "beta": beta_in, "tau_s": beta_in * self.T})
+            if self.truth_linear:
+                ft["linear"] = lin.copy()
+                ft["linear_clean"] = bg
             if self.truth_masks or self.truth_clean:
                 if self.truth_masks:
                     diff = sensor.codes_float(lin) - sensor.codes_float(bg)
@@ -1189,7 +1197,7 @@ def _rain_segments(*, rain_rate_mm_h, dsd, dsd_params, parsivel, start, seconds,
 def simulate(profile, *, seconds=None, n_frames=None, rain_rate_mm_h=None, dsd=None, dsd_params=None,
              parsivel=None, start=None, velocity_model="gunn_kinzer", wind_m_s=0.0, wind_dir_deg=0.0,
              background="uniform:60", motion=None, seed=0, truth_masks=False, truth_clean=False,
-             truth_drops=True, drop_brightness_dn=DEFAULT_DROP_BRIGHTNESS_DN,
+             truth_drops=True, truth_linear=False, drop_brightness_dn=DEFAULT_DROP_BRIGHTNESS_DN,
              render_threshold_dn=DEFAULT_RENDER_THRESHOLD_DN, depth_range_m=None, reference_depth_m=None,
              truth_window_s=10.0, jpeg_quality=None, noise=True) -> Simulation:
     """Simulate rain in front of a camera (Secs. 3, 4.3, 6 [GargNayar2007]).
@@ -1233,6 +1241,9 @@ def simulate(profile, *, seconds=None, n_frames=None, rain_rate_mm_h=None, dsd=N
         Add ``clean`` (the rain-free frame after the sensor, without noise).
     truth_drops : bool
         Add ``drops`` (a :class:`DropTable`) to each frame's truth.
+    truth_linear : bool
+        Add ``linear`` and ``linear_clean``: the rainy and rain-free frames in
+        linear intensity before the sensor (float32, gray levels).
     drop_brightness_dn : float
         E_r, the linear brightness of a drop [gray levels] (Sec. 4.2.3).
     render_threshold_dn : float
@@ -1316,6 +1327,7 @@ def simulate(profile, *, seconds=None, n_frames=None, rain_rate_mm_h=None, dsd=N
     return Simulation(profile, n_frames=n_frames, segments=segments, edges=edges,
                       velocity_model=velocity_model, wind=wind, scene=scene, seed=seed,
                       truth_masks=truth_masks, truth_clean=truth_clean, truth_drops=truth_drops,
+                      truth_linear=truth_linear,
                       drop_brightness_dn=drop_brightness_dn, render_threshold_dn=render_threshold_dn,
                       depth_range_m=depth_range_m, reference_depth_m=reference_depth_m,
                       truth_window_s=truth_window_s, jpeg_quality=jpeg_quality, noise=noise,

@@ -207,7 +207,7 @@ class RainDynamics:
     """
 
     def __init__(self, shape: tuple[int, int], *, l: int = 11, f: int = 30, cell: int = 3, smooth: int = 7,
-                 max_pixels: int = 6000, min_ratio: float = 2.5, min_strength: float = 0.05,
+                 max_pixels: int = 3000, min_ratio: float = 2.5, min_strength: float = 0.05,
                  min_events: float = 20.0, max_angle_dev_deg: float | None = 30.0):
         if f < 1:
             raise ValueError(f"window f must be at least one frame, got {f!r}")
@@ -247,14 +247,25 @@ class RainDynamics:
             raise ValueError(f"binary field has shape {b.shape}, expected {self.shape}")
         rows, cols, energy, w = rain_pixel_energies(b, masks=self.masks, max_pixels=self.max_pixels)
         cid = (rows // self.cell) * self.gw + cols // self.cell
-        e = energy * np.float32(w)
-        np.add.at(self._acc, cid, e)
-        np.add.at(self._cnt, cid, w)
-        self._ring.append((cid, e, w))
+        # Sum the frame's contributions per cell (sorted segments, no scatter-add).
+        if cid.size:
+            order = np.argsort(cid, kind="stable")
+            cs = cid[order]
+            starts = np.flatnonzero(np.r_[True, cs[1:] != cs[:-1]])
+            ucid = cs[starts]
+            e = np.add.reduceat(energy[order], starts, axis=0).astype(np.float64) * w
+            n = np.diff(np.r_[starts, cs.size]).astype(np.float64) * w
+        else:
+            ucid = cid
+            e = np.zeros((0, self.K))
+            n = np.zeros(0)
+        self._acc[ucid] += e
+        self._cnt[ucid] += n
+        self._ring.append((ucid, e, n))
         while len(self._ring) > self.f:
-            ocid, oe, ow = self._ring.popleft()
-            np.subtract.at(self._acc, ocid, oe)
-            np.subtract.at(self._cnt, ocid, ow)
+            ocid, oe, on = self._ring.popleft()
+            self._acc[ocid] -= oe
+            self._cnt[ocid] -= on
 
     def field(self) -> DynamicsField:
         """Direction, strength and segmentation from the current window."""
@@ -264,9 +275,7 @@ class RainDynamics:
         acc = self._acc.reshape(self.gh, self.gw, self.K).astype(np.float32)
         cnt = self._cnt.reshape(self.gh, self.gw).astype(np.float32)
         k = (self.smooth, self.smooth)
-        sm = np.empty_like(acc)
-        for j in range(self.K):
-            sm[..., j] = cv2.boxFilter(acc[..., j], -1, k, normalize=False, borderType=cv2.BORDER_CONSTANT)
+        sm = cv2.boxFilter(np.ascontiguousarray(acc), -1, k, normalize=False, borderType=cv2.BORDER_CONSTANT)
         events = cv2.boxFilter(cnt, -1, k, normalize=False, borderType=cv2.BORDER_CONSTANT)
         area = float(self.cell * self.cell * self.smooth * self.smooth * frames)
         # Remove what an uncorrelated field of the same density would give,

@@ -27,6 +27,7 @@ import numpy as np
 
 __all__ = [
     "MOTION_MODELS",
+    "WARP_MIN_SHIFT_PX",
     "estimate_motion",
     "warp_to",
     "MotionTracker",
@@ -34,6 +35,9 @@ __all__ = [
 ]
 
 MOTION_MODELS = ("none", "translation", "euclidean")
+
+#: Displacements below this are not compensated [px] (see :func:`warp_to`).
+WARP_MIN_SHIFT_PX = 0.3
 
 
 def _check_model(model: str) -> str:
@@ -160,7 +164,7 @@ def transform_magnitude_px(M: np.ndarray, shape: tuple[int, int]) -> float:
     return float(np.max(np.hypot(*(moved - corners[:2]))))
 
 
-def warp_to(frame: np.ndarray, M: np.ndarray, *, min_shift_px: float = 0.05,
+def warp_to(frame: np.ndarray, M: np.ndarray, *, min_shift_px: float = None,
             with_valid: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
     """Warp ``frame`` into the reference frame: ``aligned(x) = frame(M x)``.
 
@@ -170,8 +174,11 @@ def warp_to(frame: np.ndarray, M: np.ndarray, *, min_shift_px: float = 0.05,
     M : (3, 3) array
         Transform from :func:`estimate_motion` (or a composition of them).
     min_shift_px : float
-        Below this displacement [px] the frame is returned unwarped (no
-        needless interpolation blur on a static camera).
+        Below this displacement [px] the frame is returned unwarped: no
+        interpolation blur on a static camera, whose phase-correlation
+        estimates scatter by a tenth of a pixel or so.  A uniform residual
+        misalignment raises a pixel above one neighbour and lowers it below
+        the other, so it creates no one-frame spike.
     with_valid : bool
         Also return the (M, N) bool mask of pixels that fall inside ``frame``.
 
@@ -183,6 +190,8 @@ def warp_to(frame: np.ndarray, M: np.ndarray, *, min_shift_px: float = 0.05,
     import cv2
 
     h, w = frame.shape[:2]
+    if min_shift_px is None:
+        min_shift_px = WARP_MIN_SHIFT_PX
     if transform_magnitude_px(M, (h, w)) < min_shift_px:
         return frame, None
     flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP

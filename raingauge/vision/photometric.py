@@ -138,8 +138,12 @@ class Streak:
 
     @property
     def length_px(self) -> float:
-        """Streak length [px], the major axis of the pixel distribution."""
-        return self.major_axis_px
+        """Streak length [px]: a uniform rod with the streak's second moment along its axis.
+
+        A rod of length L has variance L^2 / 12 along it, so L = sqrt(12 lambda_1)
+        = (sqrt(12) / 4) x the regionprops major axis (which assumes an ellipse).
+        """
+        return max(self.major_axis_px * math.sqrt(12.0) / 4.0, 1.0)
 
     @property
     def width_px(self) -> float:
@@ -359,22 +363,12 @@ def _label(mask):
 
 
 def _segment_max(out: np.ndarray, seg: np.ndarray, values: np.ndarray) -> None:
-    """out[s] = max(out[s], values[seg == s]) without a Python loop (sort-based)."""
-    if values.size == 0:
-        return
-    order = np.lexsort((values, seg))
-    s_sorted = seg[order]
-    last = np.flatnonzero(np.r_[s_sorted[1:] != s_sorted[:-1], True])
-    out[s_sorted[last]] = np.maximum(out[s_sorted[last]], values[order][last])
+    """out[s] = max(out[s], values[seg == s]), unbuffered."""
+    np.maximum.at(out, seg, values)
 
 
 def _segment_min(out: np.ndarray, seg: np.ndarray, values: np.ndarray) -> None:
-    if values.size == 0:
-        return
-    order = np.lexsort((values, seg))
-    s_sorted = seg[order]
-    first = np.flatnonzero(np.r_[True, s_sorted[1:] != s_sorted[:-1]])
-    out[s_sorted[first]] = np.minimum(out[s_sorted[first]], values[order][first])
+    np.minimum.at(out, seg, values)
 
 
 def photometric_filter(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, mask: np.ndarray, *,

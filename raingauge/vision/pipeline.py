@@ -23,9 +23,9 @@ import numpy as np
 
 from raingauge.vision.candidates import candidates, luminance
 from raingauge.vision.dynamics import DynamicsField, RainDynamics
-from raingauge.vision.motion import MotionTracker, warp_to
+from raingauge.vision.motion import WARP_MIN_SHIFT_PX, MotionTracker, transform_magnitude_px, warp_to
 from raingauge.vision.photometric import StreakFits, beta_max_for_exposure, photometric_filter
-from raingauge.vision.removal import remove_rain
+from raingauge.vision.removal import remove_rain, run_prefilter
 
 __all__ = ["detect_streaks", "Derainer", "DerainedFrame", "derain_clip", "estimate_noise_sigma"]
 
@@ -121,6 +121,9 @@ class _Unique:
     inputs: list             # input indices showing this frame
     b: np.ndarray | None = None
     streaks: StreakFits | None = None
+    rise: np.ndarray | None = None   # I_n - I_{n-1} >= c (own coordinates)
+    fall: np.ndarray | None = None   # I_n - I_{n+1} >= c
+    warped: bool = False
 
 
 class Derainer:
@@ -154,6 +157,9 @@ class Derainer:
         below this are repeats [gray levels].
     dynamics : dict, optional
         Extra arguments of :class:`RainDynamics` (cell, smooth, min_ratio, ...).
+    segment_every : int
+        Recompute the direction field and segmentation every this many frames
+        (it integrates f frames, so it changes slowly).
     """
 
     LOOKAHEAD = 3
@@ -162,7 +168,7 @@ class Derainer:
                  motion: str = "translation", beta_max: float | None = None,
                  noise_sigma: float | str | None = None, min_pixels: int = 5, grow_px: int = 1,
                  runs: bool = True, repeat_tol: float = 0.1, tol: float | None = None,
-                 dynamics: dict | None = None):
+                 dynamics: dict | None = None, segment_every: int = 4):
         self.profile = profile
         if c is None:
             c = profile.detection_threshold_dn if profile is not None else 3.0
@@ -191,6 +197,8 @@ class Derainer:
         self._next_remove = 0
         self._shape = None
         self._field: DynamicsField | None = None
+        self._since_field = 0
+        self.segment_every = int(segment_every)
         self.streak_log: list[tuple[int, int]] = []   # (frame index, accepted streaks)
 
     # ----------------------------------------------------------------- helpers
@@ -284,23 +292,36 @@ class Derainer:
         prev, v1 = self._aligned(i, n, "lum")
         nxt, v2 = self._aligned(j, n, "lum")
         valid = v1 if v2 is None else (v2 if v1 is None else v1 & v2)
-        cur = self._units[n].lum
-        b, streaks = detect_streaks(prev, cur, nxt, c=self.c, beta_max=self.beta_max, noise_sigma=self.noise_sigma,
-                                    min_pixels=self.min_pixels, tol=self.tol, valid=valid)
         u = self._units[n]
+        cur = u.lum
+        thr = cur - np.float32(self.c)
+        rise = prev <= thr
+        fall = nxt <= thr
+        cand = rise & fall                      # Eq. (19)
+        if self.tol is not None:
+            cand &= np.abs(prev - nxt) <= self.tol
+        if valid is not None:
+            cand &= valid
+        b, streaks = photometric_filter(prev, cur, nxt, cand, beta_max=self.beta_max, noise_sigma=self.noise_sigma,
+                                        min_pixels=self.min_pixels)
+        if not boundary:
+            u.rise, u.fall = rise, fall
+        u.warped = v1 is not None or v2 is not None
         u.b = b
         u.streaks = streaks
         if not boundary:
             self._dyn.update(b)
-            self._field = None
 
     def _finish(self, n: int, last: int | None) -> list[DerainedFrame]:
         u = self._units[n]
         top = self._n_units - 1 if last is None else last
-        if self._field is None:
+        if self._field is None or self._since_field >= self.segment_every:
             self._field = self._dyn.field()
+            self._region = self._field.region_mask(dilate_px=self.l // 2)
+            self._since_field = 0
+        self._since_field += 1
         field = self._field
-        region = field.region_mask(dilate_px=self.l // 2)
+        region = self._region
         if u.b is None:  # fewer than 3 distinct frames: nothing can be detected
             u.b = np.zeros(u.lum.shape, bool)
         if top >= 2 and np.any(region):
@@ -311,13 +332,22 @@ class Derainer:
                 y, _ = self._aligned(j, n, "lum")
                 lins.append(a)
                 lums.append(y)
-            derained, replaced = remove_rain(np.stack(lins), np.stack(lums), u.b, region, c=self.c,
+            near = [self._units[j] for j in ids[1:6]]
+            run_cand = None
+            if ids[1:6] == list(range(n - 2, n + 3)) and all(
+                    v.rise is not None and v.fall is not None and not v.warped
+                    and transform_magnitude_px(self._tracker.between(v.k, n), u.lum.shape) < WARP_MIN_SHIFT_PX
+                    for v in near):
+                run_cand = run_prefilter([v.rise for v in near], [v.fall for v in near])
+            derained, replaced = remove_rain(lins, lums, u.b, region, c=self.c, run_candidates=run_cand,
                                              runs=self.runs, tol=self.tol, grow_px=self.grow_px,
                                              beta_max=self.beta_max, noise_sigma=self.noise_sigma,
                                              min_pixels=self.min_pixels)
             out_frame = u.raw.copy()
-            if np.any(replaced):
-                out_frame[replaced] = self._to_uint8(derained)[replaced]
+            idx = np.flatnonzero(replaced.ravel())
+            if idx.size:
+                n_pix = replaced.size
+                out_frame.reshape(n_pix, -1)[idx] = self._to_uint8(derained.reshape(n_pix, -1)[idx])
         else:
             replaced = np.zeros(u.lum.shape, bool)
             out_frame = u.raw.copy()

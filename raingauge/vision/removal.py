@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["replace_single", "find_runs", "remove_rain", "RUNS"]
+__all__ = ["replace_single", "find_runs", "run_prefilter", "remove_rain", "RUNS"]
 
 #: Runs of consecutive rain frames containing the centre (offsets relative to it),
 #: shortest first: two frames, then three.
@@ -35,13 +35,44 @@ def replace_single(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, mask: np.
     -------
     Array like ``cur`` (a copy).
     """
-    out = np.array(cur, dtype=np.float32, copy=True)
-    if np.any(mask):
-        out[mask] = 0.5 * (np.asarray(prev, np.float32)[mask] + np.asarray(nxt, np.float32)[mask])
+    cur = np.asarray(cur, dtype=np.float32)
+    out = cur.copy()
+    idx = np.flatnonzero(np.asarray(mask).ravel())
+    if idx.size:
+        n = mask.size
+        o = out.reshape(n, -1)
+        o[idx] = 0.5 * (np.asarray(prev, np.float32).reshape(n, -1)[idx] + np.asarray(nxt, np.float32).reshape(n, -1)[idx])
     return out
 
 
-def find_runs(lum: np.ndarray, *, c: float, where: np.ndarray | None = None, tol: float | None = None
+def run_prefilter(rises: list, falls: list) -> np.ndarray:
+    """Pixels that may lie in a 2- or 3-frame run through the centre frame.
+
+    Parameters
+    ----------
+    rises : list of 5 (M, N) bool arrays
+        ``I_k - I_{k-1} >= c`` for frames k = n-2 .. n+2.
+    falls : list of 5 (M, N) bool arrays
+        ``I_k - I_{k+1} >= c`` for frames k = n-2 .. n+2.
+
+    Every run [a, e] needs a rise at a and a fall at e; these one-sided tests
+    are by-products of Eq. (19) for each frame, so this costs a few boolean
+    operations.  A pixel without any such neighbour (3 x 3) is an
+    isolated noise coincidence, not part of a streak, and is dropped.
+    """
+    import cv2
+
+    R = dict(zip(range(-2, 3), rises))
+    F = dict(zip(range(-2, 3), falls))
+    pre = np.zeros_like(rises[2])
+    for a, e in RUNS:
+        pre |= R[a] & F[e]
+    u8 = pre.view(np.uint8)
+    count = cv2.boxFilter(u8, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+    return pre & (count >= 2)
+
+
+def find_runs(lum, *, c: float, where: np.ndarray | None = None, tol: float | None = None
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pixels of the centre frame hit by rain in 2 or 3 consecutive frames.
 
@@ -51,13 +82,13 @@ def find_runs(lum: np.ndarray, *, c: float, where: np.ndarray | None = None, tol
 
     Parameters
     ----------
-    lum : (7, M, N) float array
+    lum : sequence of 7 (M, N) float arrays
         Linearised luminance of frames n-3 .. n+3 aligned to frame n [gray levels].
     c : float
         Detection threshold [gray levels].
     where : (M, N) bool array, optional
-        Only these pixels are examined (the rain region minus pixels already
-        handled).
+        Only these pixels are examined (e.g. the rain region, less the pixels
+        already handled, and :func:`run_prefilter`).
     tol : float, optional
         Largest allowed difference between the two unaffected frames [gray levels].
 
@@ -68,19 +99,16 @@ def find_runs(lum: np.ndarray, *, c: float, where: np.ndarray | None = None, tol
     before, after : (P,) int arrays
         Indices into ``lum`` of the unaffected frames on either side.
     """
-    lum = np.asarray(lum, dtype=np.float32)
-    if lum.ndim != 3 or lum.shape[0] != 7:
-        raise ValueError(f"find_runs needs 7 frames (n-3 .. n+3), got shape {lum.shape}")
-    centre = lum[3]
-    lo = lum.min(axis=0)
-    pre = centre - lo >= c
-    if where is not None:
-        pre &= where
-    flat = np.flatnonzero(pre.ravel())
+    lum = [np.asarray(x, dtype=np.float32) for x in lum]
+    if len(lum) != 7 or lum[3].ndim != 2:
+        raise ValueError(f"find_runs needs 7 (M, N) frames (n-3 .. n+3), got {len(lum)}")
+    if where is None:
+        where = np.ones(lum[3].shape, bool)
+    flat = np.flatnonzero(np.asarray(where).ravel())
     if flat.size == 0:
         e = np.zeros(0, np.int64)
         return e, e, e
-    v = lum.reshape(7, -1)[:, flat]  # (7, P)
+    v = np.stack([x.ravel()[flat] for x in lum])  # (7, P)
     before = np.full(flat.size, -1, np.int64)
     after = np.full(flat.size, -1, np.int64)
     todo = np.ones(flat.size, bool)
@@ -101,15 +129,16 @@ def find_runs(lum: np.ndarray, *, c: float, where: np.ndarray | None = None, tol
 def remove_rain(frames: np.ndarray, lum: np.ndarray, rain: np.ndarray, region: np.ndarray, *, c: float,
                 runs: bool = True, tol: float | None = None, grow_px: int = 1,
                 grow_threshold: float | None = None, beta_max: float | None = None,
-                noise_sigma: float = 1.0, min_pixels: int = 5) -> tuple[np.ndarray, np.ndarray]:
+                noise_sigma: float = 1.0, min_pixels: int = 5,
+                run_candidates: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Derain the centre frame of a 7-frame window, Sec. 5.2 [GargNayar2007].
 
     Parameters
     ----------
-    frames : (7, M, N) or (7, M, N, C) float array
+    frames : sequence of 7 (M, N) or (M, N, C) float arrays
         Linearised frames n-3 .. n+3 aligned to frame n [gray levels]; every
         channel is cleaned.
-    lum : (7, M, N) float array
+    lum : sequence of 7 (M, N) float arrays
         Their luminance [gray levels].
     rain : (M, N) bool array
         Rain pixels of frame n (accepted streaks, the binary field b).
@@ -135,6 +164,9 @@ def remove_rain(frames: np.ndarray, lum: np.ndarray, rain: np.ndarray, region: n
         Camera noise for that test [gray levels].
     min_pixels : int
         Smallest streak of runs [px].
+    run_candidates : (M, N) bool array, optional
+        Pixels that may hold a run (:func:`run_prefilter`); default computed
+        from ``lum``.
 
     Returns
     -------
@@ -144,9 +176,9 @@ def remove_rain(frames: np.ndarray, lum: np.ndarray, rain: np.ndarray, region: n
     """
     import cv2
 
-    frames = np.asarray(frames, dtype=np.float32)
-    lum = np.asarray(lum, dtype=np.float32)
-    if frames.shape[0] != 7 or lum.shape[0] != 7:
+    frames = [np.asarray(x, dtype=np.float32) for x in frames]
+    lum = [np.asarray(x, dtype=np.float32) for x in lum]
+    if len(frames) != 7 or len(lum) != 7:
         raise ValueError("remove_rain needs the 7 frames n-3 .. n+3")
     single = rain & region
     if grow_px > 0 and np.any(single):
@@ -158,26 +190,32 @@ def remove_rain(frames: np.ndarray, lum: np.ndarray, rain: np.ndarray, region: n
     out = replace_single(frames[2], frames[3], frames[4], single)
     replaced = single.copy()
     if runs and np.any(region):
-        flat, before, after = find_runs(lum, c=c, where=region & ~single, tol=tol)
+        if run_candidates is None:
+            c32 = np.float32(c)
+            rises = [lum[k] - lum[k - 1] >= c32 for k in range(1, 6)]
+            falls = [lum[k] - lum[k + 1] >= c32 for k in range(1, 6)]
+            run_candidates = run_prefilter(rises, falls)
+        flat, before, after = find_runs(lum, c=c, where=region & ~single & run_candidates, tol=tol)
         if flat.size and beta_max is not None:
             from raingauge.vision.photometric import photometric_filter
 
-            n_pix = lum.shape[1] * lum.shape[2]
-            lf = lum.reshape(7, n_pix)
+            vals_l = np.stack([x.ravel()[flat] for x in lum])
+            cols = np.arange(flat.size)
             bg_before = lum[3].copy()
             bg_after = lum[3].copy()
-            bg_before.ravel()[flat] = lf[before, flat]
-            bg_after.ravel()[flat] = lf[after, flat]
-            m = np.zeros(lum.shape[1:], bool)
+            bg_before.ravel()[flat] = vals_l[before, cols]
+            bg_after.ravel()[flat] = vals_l[after, cols]
+            m = np.zeros(lum[3].shape, bool)
             m.ravel()[flat] = True
             ok, _ = photometric_filter(bg_before, lum[3], bg_after, m, beta_max=beta_max,
                                        noise_sigma=noise_sigma, min_pixels=min_pixels)
             keep = ok.ravel()[flat]
             flat, before, after = flat[keep], before[keep], after[keep]
         if flat.size:
-            n_pix = lum.shape[1] * lum.shape[2]
-            fr = frames.reshape(7, n_pix, -1)
-            vals = 0.5 * (fr[before, flat] + fr[after, flat])
+            n_pix = lum[3].size
+            fv = np.stack([x.reshape(n_pix, -1)[flat] for x in frames])  # (7, P, C)
+            cols = np.arange(flat.size)
+            vals = 0.5 * (fv[before, cols] + fv[after, cols])
             o = out.reshape(n_pix, -1)
             o[flat] = vals
             replaced.ravel()[flat] = True

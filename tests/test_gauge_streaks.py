@@ -1,0 +1,165 @@
+"""Per-streak measurement: sub-pixel width and length of rasterised streaks of known a, v, z."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from raingauge.gauge.streaks import (
+    change_images,
+    depth_from_blur_m,
+    detect_streaks,
+    fit_cross_profile,
+    measure_streaks,
+    radius_from_width_m,
+    velocity_from_length_m_s,
+)
+from raingauge.profile import default_profile
+
+CAM = default_profile()
+
+
+def capsule_change(shape, *, x0, y0, dx, dy, width, contrast, ss=6):
+    """Change image of a uniform streak (the paper's constant tau): a capsule of diameter
+    ``width`` swept from (x0, y0) by (dx, dy), holding the drop's exposure area
+    pi (w/2)^2 spread evenly (Eqs. 17, 23), times ``contrast`` (E_r - E_b).
+    Supersampled ss x ss per pixel; independent of the gauge's own model."""
+    m, n = shape
+    r = width / 2.0
+    off = (np.arange(ss) + 0.5) / ss - 0.5
+    ys = (np.arange(m)[:, None] + off[None, :]).ravel()
+    xs = (np.arange(n)[:, None] + off[None, :]).ravel()
+    yy, xx = np.meshgrid(ys, xs, indexing="ij")
+    length = math.hypot(dx, dy)
+    ux, uy = dx / length, dy / length
+    qx, qy = xx - x0, yy - y0
+    t = np.clip(qx * ux + qy * uy, 0.0, length)
+    inside = (qx - t * ux) ** 2 + (qy - t * uy) ** 2 <= r * r
+    cover = inside.reshape(m, ss, n, ss).mean(axis=(1, 3))
+    beta = math.pi * r * r / (2 * r * length + math.pi * r * r)
+    return cover * beta * contrast
+
+
+def measure_one(change, spike=None, *, c=3.0):
+    spike = change if spike is None else spike
+    labels, stats = detect_streaks(spike.astype(np.float32), c=c)
+    assert stats.shape[0] > 1, "no streak detected"
+    big = int(np.argmax(stats[1:, 4]) + 1)
+    return measure_streaks(change.astype(np.float32), labels, stats, CAM, select=[big])[0]
+
+
+@pytest.mark.parametrize("a_mm, v, z", [(1.0, 4.4, 2.5), (2.0, 6.5, 2.45), (0.6, 2.5, 2.55)])
+def test_width_and_length_recover_a_and_v(a_mm, v, z):
+    """A focused drop of known radius, speed and depth, with sensor noise: the measured
+    width and motion give back a and v (at the true z) within a few per cent."""
+    rng = np.random.default_rng(int(a_mm * 10))
+    f, T = CAM.focal_length_px, CAM.exposure_s
+    w = 2 * f * a_mm * 1e-3 / z
+    motion = f * v * T / z
+    errs_a, errs_v = [], []
+    for k in range(6):
+        shape = (int(motion + 40), 60)
+        img = capsule_change(shape, x0=25.3 + rng.random(), y0=15.2 + rng.random(), dx=0.0, dy=motion,
+                             width=w, contrast=140.0)
+        change = img + rng.normal(0, 2.0 * math.sqrt(1.5), shape)
+        p = measure_one(change, img + rng.normal(0, 2.4, shape))
+        length = p.length_px
+        errs_a.append(radius_from_width_m(p.width_px, z, focal_length_px=f) / (a_mm * 1e-3) - 1)
+        errs_v.append(velocity_from_length_m_s(length, p.width_px, z, focal_length_px=f, exposure_s=T) / v - 1)
+    assert abs(np.mean(errs_a)) < 0.06, errs_a
+    assert abs(np.mean(errs_v)) < 0.03, errs_v
+    assert np.std(errs_v) < 0.04
+
+
+def test_slanted_streak_wind():
+    """Wind slants the streak: the vertical motion, the slope and the width across it are
+    still measured."""
+    rng = np.random.default_rng(3)
+    shape = (130, 90)
+    img = capsule_change(shape, x0=20.4, y0=15.6, dx=25.0, dy=80.0, width=6.0, contrast=140.0)
+    change = img + rng.normal(0, 2.0, shape)
+    p = measure_one(change)
+    assert p.motion_y_px == pytest.approx(80.0, abs=2.0)
+    assert p.axis[2] == pytest.approx(25.0 / 80.0, abs=0.02)
+    assert p.width_px == pytest.approx(6.0, rel=0.08)
+
+
+def test_gaussian_blur_is_not_width():
+    """Optical blur (a Gaussian of the edges) is fitted as spread, not width: a blurred
+    streak keeps its width, and reports a larger blur than a sharp one."""
+    import cv2
+
+    rng = np.random.default_rng(4)
+    shape = (100, 60)
+    img = capsule_change(shape, x0=30.2, y0=15.0, dx=0.0, dy=60.0, width=7.0, contrast=140.0)
+    blurred = cv2.GaussianBlur(img, (0, 0), 1.2)
+    p_sharp = measure_one(img + rng.normal(0, 1.0, shape))
+    p_blur = measure_one(blurred + rng.normal(0, 1.0, shape))
+    assert p_blur.width_px == pytest.approx(7.0, rel=0.1)
+    assert p_blur.blur_px > p_sharp.blur_px + 1.0
+    assert p_blur.motion_y_px == pytest.approx(60.0, abs=1.5)
+
+
+def test_cross_profile_fit_is_subpixel():
+    """The box-Gaussian fit of a noiseless sampled box gives its width to 0.05 px."""
+    xi = np.arange(-8, 8, 0.5) + 0.25
+    for w in (1.6, 3.3, 7.9):
+        # pixel-integrated box: exact overlap of [x-0.5, x+0.5] with [-w/2, w/2]
+        vals = np.clip(np.minimum(xi + 0.5, w / 2) - np.maximum(xi - 0.5, -w / 2), 0, None) * 10.0
+        fit = fit_cross_profile(xi, vals)
+        assert fit["width"] == pytest.approx(w, abs=0.05)
+
+
+def test_pieces_of_one_streak_are_merged():
+    """A streak cut in two by a gap of a few rows (a dark patch behind it) is one streak."""
+    shape = (120, 50)
+    img = capsule_change(shape, x0=25.0, y0=10.0, dx=0.0, dy=90.0, width=4.0, contrast=140.0)
+    img[55:59, :] = 0.0
+    labels, stats = detect_streaks(img.astype(np.float32), c=3.0, smooth_px=1)
+    assert stats.shape[0] - 1 == 1
+    labels2, stats2 = detect_streaks(img.astype(np.float32), c=3.0, smooth_px=1, merge_gap_px=0)
+    assert stats2.shape[0] - 1 == 2
+
+
+def test_clipped_streak_is_flagged():
+    shape = (80, 50)
+    img = capsule_change(shape, x0=25.0, y0=40.0, dx=0.0, dy=60.0, width=4.0, contrast=140.0)
+    p = measure_one(img)
+    assert p.clipped
+    img2 = capsule_change(shape, x0=25.0, y0=10.0, dx=0.0, dy=50.0, width=4.0, contrast=140.0)
+    assert not measure_one(img2).clipped
+
+
+def test_change_images_spike_is_eq19():
+    """spike = min(I_n - I_{n-1}, I_n - I_{n+1}); change = I_n - mean(neighbours)."""
+    rng = np.random.default_rng(0)
+    prev, cur, nxt = (rng.uniform(0, 255, (20, 30)).astype(np.float32) for _ in range(3))
+    spike, change = change_images(prev, cur, nxt)
+    np.testing.assert_allclose(spike, np.minimum(cur - prev, cur - nxt), atol=1e-4)
+    np.testing.assert_allclose(change, cur - 0.5 * (prev + nxt), atol=1e-4)
+
+
+def test_depth_from_blur_round_trip():
+    """depth_from_blur_m inverts the thin-lens blur circle on both sides of the focus."""
+    from raingauge.physics.camera import blur_circle_px
+
+    kw = dict(focal_length_px=CAM.focal_length_px, f_number=CAM.f_number,
+              focus_distance_m=CAM.focus_distance_m, pixel_pitch_m=CAM.pixel_pitch_m)
+    for z in (2.2, 2.45, 2.6, 3.1):
+        b = blur_circle_px(z, **kw)
+        near, far = depth_from_blur_m(b, **kw)
+        assert min(abs(near - z), abs(far - z)) < 1e-9
+        assert near <= CAM.focus_distance_m <= far
+
+
+def test_equations_invert_eq26():
+    """a = w z / (2 f) inverts w = 2 f a / z (Eq. 26 as corrected); v from L = vT f/z + w."""
+    from raingauge.physics.camera import streak_width_px
+
+    f = CAM.focal_length_px
+    w = float(streak_width_px(1.2e-3, 2.5, focal_length_px=f))
+    assert radius_from_width_m(w, 2.5, focal_length_px=f) == pytest.approx(1.2e-3)
+    L = f * 5.0 * CAM.exposure_s / 2.5 + w
+    assert velocity_from_length_m_s(L, w, 2.5, focal_length_px=f, exposure_s=CAM.exposure_s) == pytest.approx(5.0)

@@ -1,0 +1,122 @@
+"""Removal (Sec. 5.2), global motion compensation and the baselines."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from raingauge.vision import (
+    MOG2Detector, MotionTracker, estimate_motion, find_runs, remove_rain, replace_single, temporal_median,
+    warp_to,
+)
+from raingauge.vision.removal import run_prefilter
+from test_vision_synth import texture
+
+
+def _window(shape=(30, 40), level=80.0):
+    return [np.full(shape, level, np.float32) for _ in range(7)]
+
+
+def test_replace_single_uses_mean_of_neighbours_on_every_channel():
+    prev = np.full((4, 4, 3), 10.0, np.float32)
+    nxt = np.full((4, 4, 3), 30.0, np.float32)
+    cur = np.full((4, 4, 3), 99.0, np.float32)
+    mask = np.zeros((4, 4), bool)
+    mask[1, 2] = True
+    out = replace_single(prev, cur, nxt, mask)
+    np.testing.assert_array_equal(out[1, 2], [20.0, 20.0, 20.0])
+    assert (out[~mask] == 99.0).all()
+
+
+@pytest.mark.parametrize("run, expect", [((-1, 0), (1, 4)), ((0, 1), (2, 5)), ((-2, 0), (0, 4)),
+                                         ((-1, 1), (1, 5)), ((0, 2), (2, 6))])
+def test_find_runs_two_and_three_frames(run, expect):
+    lum = _window()
+    for k in range(3 + run[0], 3 + run[1] + 1):
+        lum[k][10, 10] += 25.0 + k          # different drops: different brightness
+    flat, before, after = find_runs(lum, c=3.0)
+    assert list(flat) == [10 * 40 + 10]
+    assert (before[0], after[0]) == expect
+
+
+def test_find_runs_ignores_single_spikes_steps_and_long_changes():
+    lum = _window()
+    lum[3][5, 5] += 30                      # a one-frame spike (Eq. 19 handles it)
+    for k in range(3, 7):
+        lum[k][6, 6] += 30                  # a step: the scene changed
+    for k in range(0, 7):
+        lum[k][7, 7] += 30 if k % 2 else 0  # flicker longer than three frames
+    flat, _, _ = find_runs(lum, c=3.0)
+    assert 5 * 40 + 5 not in flat and 6 * 40 + 6 not in flat
+
+
+def test_run_prefilter_keeps_runs_and_drops_isolated_coincidences():
+    shape = (20, 20)
+    rises = [np.zeros(shape, bool) for _ in range(5)]
+    falls = [np.zeros(shape, bool) for _ in range(5)]
+    rises[1][5:10, 5] = True                # run (-1, 0) on a streak of 5 pixels
+    falls[2][5:10, 5] = True
+    rises[2][15, 15] = falls[3][15, 15] = True   # a lone pixel
+    pre = run_prefilter(rises, falls)
+    assert pre[5:10, 5].all() and not pre[15, 15]
+
+
+def test_remove_rain_only_inside_region_and_for_runs():
+    rng = np.random.default_rng(0)
+    bg = texture((40, 60), seed=1)
+    frames = [bg + rng.normal(0, 0.3, bg.shape).astype(np.float32) for _ in range(7)]
+    rain = np.zeros(bg.shape, bool)
+    rain[5:25, 10:12] = True                 # a one-frame streak in frame n
+    frames[3][rain] += 30
+    for k in (3, 4):                         # drops in frames n and n+1 on another streak
+        frames[k][5:25, 40:42] += 25 + 5 * k
+    region = np.zeros(bg.shape, bool)
+    region[:, :30] = True                    # the second streak half outside the region
+    region[:15, 40:42] = True
+    out, replaced = remove_rain(frames, frames, rain, region, c=3.0, grow_px=0, beta_max=0.3, noise_sigma=0.3,
+                                min_pixels=5)
+    assert np.abs(out[rain] - bg[rain]).max() < 2.0
+    assert replaced[5:15, 40:42].all() and not replaced[15:25, 40:42].any()
+    assert np.abs(out[5:15, 40:42] - bg[5:15, 40:42]).max() < 2.0
+    assert replaced.sum() == rain.sum() + 20
+    # colour: the same pixels are cleaned on every channel
+    col = [np.dstack([f, f * 0.5, f * 0.25]) for f in frames]
+    out_c, rep_c = remove_rain(col, frames, rain, region, c=3.0, grow_px=0)
+    np.testing.assert_allclose(out_c[..., 1][rain], 0.5 * out[rain], rtol=1e-5)
+
+
+def test_estimate_motion_translation_subpixel():
+    big = texture((400, 520), seed=4, blur=2.5)
+    ref = big[40:280, 40:360]
+    mov = big[40 + 2:280 + 2, 40 - 3:360 - 3]          # mov(x, y) = ref(x - 3, y + 2)
+    M = estimate_motion(ref, mov, model="translation")   # aligned(x) = mov(M x) = ref(x)
+    assert M[0, 2] == pytest.approx(3.0, abs=0.1) and M[1, 2] == pytest.approx(-2.0, abs=0.1)
+    al, valid = warp_to(mov, M)
+    assert np.abs(al - ref)[valid].mean() < 1.0
+    with pytest.raises(ValueError, match="translation"):
+        estimate_motion(ref, mov, model="homographyX")
+
+
+def test_motion_tracker_chains_a_pan_and_static_needs_no_warp():
+    big = texture((300, 420), seed=5, blur=2.5)
+    tr = MotionTracker()
+    for k in range(5):
+        tr.add(big[30:230, 30 + 2 * k:330 + 2 * k])        # pans 2 px per frame
+    M = tr.between(0, 4)
+    assert M[0, 2] == pytest.approx(8.0, abs=0.2)
+    f = big[:200, :300]
+    same, valid = warp_to(f, np.eye(3))
+    assert same is f and valid is None
+
+
+def test_temporal_median_and_mog2_baselines():
+    frames = np.full((9, 20, 30), 50, np.uint8)
+    frames[4, 5, 5] = 200                                  # a rain spike
+    med = temporal_median(frames, radius=2)
+    assert med.shape == frames.shape and med[4, 5, 5] == 50
+    moving = np.full((40, 30, 40), 60, np.uint8)
+    for t in range(40):
+        moving[t, 10:20, t % 30:t % 30 + 8] = 220          # a moving bright object
+    det = MOG2Detector(history=20)
+    masks = [det.apply(f) for f in moving]
+    assert masks[-1][12:18, 39 % 30:39 % 30 + 8].mean() > 0.5
