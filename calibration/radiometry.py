@@ -126,7 +126,7 @@ class ResponseResult:
 
 
 def _fmt_time(t: float) -> str:
-    if t < 1 and abs(1 / t - round(1 / t)) < 1e-6 * (1 / t):
+    if t < 1 and abs(1 / t - round(1 / t)) < 1e-4 * (1 / t):
         return f"1/{round(1 / t)} s"
     return f"{t:g} s"
 

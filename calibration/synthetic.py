@@ -224,6 +224,8 @@ def render_checkerboard_views(
     # the same for all views, so computed once.
     s = int(supersample)
     ray = _pixel_rays(width, height, s, k, dist)
+    rx, ry = ray[:, 0].copy(), ray[:, 1].copy()
+    del ray
 
     obj = np.zeros((rows * cols, 3), np.float64)
     obj[:, :2] = np.mgrid[0:cols, 0:rows].T.reshape(-1, 2) * square_m
@@ -250,22 +252,24 @@ def render_checkerboard_views(
         if po[:, 0].min() < 4 or po[:, 1].min() < 4 or po[:, 0].max() > width - 5 or po[:, 1].max() > height - 5:
             continue
         rot = _rodrigues(rvec)
-        # Ray-plane intersection: the board plane is z_b = 0, i.e. n . X = n . t with n = R e_z.
+        # The board plane z_b = 0 maps to normalised image coordinates by the homography
+        # H = [r1 r2 t]; its inverse takes every pixel's ray back to board coordinates.
+        hinv = np.linalg.inv(np.column_stack([rot[:, 0], rot[:, 1], tvec]))
+        w = hinv[2, 0] * rx + hinv[2, 1] * ry + hinv[2, 2]
+        bx = (hinv[0, 0] * rx + hinv[0, 1] * ry + hinv[0, 2]) / (w * square_m)
+        by = (hinv[1, 0] * rx + hinv[1, 1] * ry + hinv[1, 2]) / (w * square_m)
+        # Rays that meet the plane behind the camera (ray . n and n . t of opposite sign).
         n = rot[:, 2]
-        lam = (n @ tvec) / (ray @ n)
-        pts_cam = ray * lam[:, None]
-        pts_board = (pts_cam - tvec) @ rot  # R^T (X - t)
-        bx = pts_board[:, 0] / square_m
-        by = pts_board[:, 1] / square_m
+        behind = (n[0] * rx + n[1] * ry + n[2]) * (n @ tvec) <= 0
         # Squares are indexed so that square (i, j) spans [i-1, i] x [j-1, j] around inner corners.
         parity = (np.floor(bx) + np.floor(by)).astype(np.int64) % 2
         inside = (bx >= -1) & (bx < cols) & (by >= -1) & (by < rows)
         margin = (bx >= -2) & (bx < cols + 1) & (by >= -2) & (by < rows + 1)
-        value = np.full(bx.shape, 110.0)  # background
+        value = np.full(bx.shape, 110.0, dtype=np.float32)  # background
         value[margin] = 225.0  # white margin
         value[inside & (parity == 0)] = 25.0  # black squares (corner square is black)
         value[inside & (parity == 1)] = 225.0
-        value[lam <= 0] = 110.0
+        value[behind] = 110.0
         big = value.reshape(height * s, width * s).astype(np.float32)
         img = cv2.resize(big, (width, height), interpolation=cv2.INTER_AREA).astype(np.float64)
         if noise_sigma_dn > 0:
@@ -478,12 +482,14 @@ def write_demo_captures(folder: str | Path, *, seed: int = 0, image_size: tuple[
                                               focal_length_px=f_px, supersample=supersample, seed=seed)
     _write_images(folder / "checkerboard", views, [f"view_{i:02d}.png" for i in range(len(views))])
     times = (1 / 1000, 1 / 500, 1 / 250, 1 / 125, 1 / 60, 1 / 30)
-    bracket, btruth = render_exposure_bracket(exposures_s=times, seed=seed)
+    bracket, btruth = render_exposure_bracket(exposures_s=times, shape=(size[1], size[0]), seed=seed)
     _write_images(folder / "bracket", bracket, [exposure_file_name(t) for t in times])
     # Still and dry frames come through the same non-linear camera as the bracket.
-    still, struth = render_still_frames(n_frames=12, read_sigma_dn=2.0, response=btruth["response"], seed=seed)
+    still, struth = render_still_frames(n_frames=12, shape=(size[1], size[0]), read_sigma_dn=2.0,
+                                        response=btruth["response"], seed=seed)
     _write_images(folder / "still", list(still), [f"frame_{i:03d}.png" for i in range(len(still))])
-    dry, dtruth = render_dry_clip(n_frames=45, sigma_dn=1.5, response=btruth["response"], seed=seed)
+    dry, dtruth = render_dry_clip(n_frames=45, shape=(size[1], size[0]), sigma_dn=1.5, response=btruth["response"],
+                                  seed=seed)
     _write_images(folder / "dry", list(dry), [f"frame_{i:03d}.png" for i in range(len(dry))])
     truth = {
         "geometry": {

@@ -145,6 +145,7 @@ class _GrayFrames:
 
         self.src, self.limit, self.what = str(src), int(limit), what
         self.fps = None
+        self.shape = None
         self._reader = None
         if _is_camera(self.src):
             import cv2
@@ -185,7 +186,7 @@ class _GrayFrames:
         n = 0
         for frame in self._raw():
             if shape is None:
-                shape = frame.shape
+                shape = self.shape = frame.shape
             elif frame.shape != shape:
                 raise InputError(f"{self.what} {self.src}: frames of different sizes. Fix: keep the camera mode fixed")
             yield frame
@@ -259,6 +260,16 @@ class Session:
             return np.asarray(res["table"]) if res.get("table") is not None else np.arange(256.0)
         return np.asarray(self.base.response_table, dtype=np.float64)
 
+    def _size_warning(self, shape, what: str) -> str:
+        """A summary line when frames do not have the profile's image size (empty otherwise)."""
+        if shape is None:
+            return ""
+        w, h = int(self.value("width_px")), int(self.value("height_px"))
+        if (shape[1], shape[0]) == (w, h):
+            return ""
+        return (f"\nwarning: the {what} are {shape[1]}x{shape[0]} but the profile's camera is {w}x{h}: "
+                "record every step in the camera mode the gauge runs in")
+
     # -- steps
     def run_geometry(self, source: str, *, pattern: str, square_m: float | None, distortion_model="k1k2p1p2",
                      views: int = 10, max_rms_px: float = 1.0) -> dict:
@@ -320,11 +331,12 @@ class Session:
         res = noise.calibrate_noise(iter(frames), table=self.table(), false_rate=false_rate)
         prov = res.to_provenance()
         prov["source"] = str(source)
+        summary = res.summary() + self._size_warning(frames.shape, "still frames")
         self.results["noise"] = _jsonable({
             "camera": {"noise_sigma_dn": res.noise_sigma_dn, "detection_threshold_dn": res.c_dn},
             "provenance": prov,
             "residual": {"noise_sigma_dn": res.noise_sigma_dn},
-            "summary": res.summary(),
+            "summary": summary,
         })
         return self.results["noise"]
 
@@ -393,11 +405,12 @@ class Session:
                              noise_sigma_dn=float(self.value("noise_sigma_dn")), table=self.table())
         prov = res.to_provenance()
         prov.update(source=str(source), frame_rate_hz=rate)
+        summary = res.summary() + self._size_warning(frames.shape, "dry-run frames")
         self.results["dry_run"] = _jsonable({
             "camera": {},
             "provenance": prov,
             "residual": {"dry_run_false_per_min": res.false_per_minute},
-            "summary": res.summary(),
+            "summary": summary,
         })
         return self.results["dry_run"]
 
@@ -457,12 +470,10 @@ class Session:
     def write(self, out: Path, name: str | None = None) -> list[Path]:
         """Write the profile (and its table) atomically; returns the files written."""
         from calibration.radiometry import write_table
-        from raingauge.errors import InputError
         from raingauge.profile import load_profile, write_profile
 
         out = Path(out)
-        if not out.parent.is_dir():
-            raise InputError(f"output folder {out.parent} does not exist. Fix: create it or choose another --out")
+        _check_out_dir(out)
         profile, prov, table, table_name = self.build(out, name)
         written = []
         if table is not None:
@@ -558,6 +569,7 @@ def run_interactive(args, out: Path | None) -> int:
           "leave a source empty to skip a step.")
     if out is None:
         out = Path(p.ask("Profile to write", "camera.toml"))
+    _check_out_dir(out)
     state_path = out.with_name(out.name + ".state.json")
     session = None
     if state_path.exists() and not args.restart:
@@ -579,13 +591,14 @@ def run_interactive(args, out: Path | None) -> int:
             except RaingaugeError as exc:
                 print(f"error: {exc}")
     a = session.answers
+    shown: set[str] = set()
 
     def remember(key, value):
         a[key] = value
         return value
 
     def step(name: str, number: int, body) -> None:
-        print(f"\n-- step {number}/5: {STEP_TITLES[name]}")
+        print(f"\n-- step {number}/6: {STEP_TITLES[name]}")
         if name in session.results:
             first = session.results[name]["summary"].splitlines()[0]
             if not p.yes(f"already done ({first.strip()}). Redo it?", False):
@@ -604,7 +617,13 @@ def run_interactive(args, out: Path | None) -> int:
                 session.results.pop(name, None)
                 _save_state(state_path, session)
                 return
-            print(result["summary"])
+            summary = result["summary"]
+            if name in shown:
+                # The plan was shown before the questions: only what changed since.
+                summary = "\n".join(line for line in summary.splitlines()
+                                     if line.startswith(("set on the lens", "warning")))
+            if summary:
+                print(summary)
             if p.yes("Accept this result?", True):
                 _save_state(state_path, session)
                 return
@@ -656,6 +675,7 @@ def run_interactive(args, out: Path | None) -> int:
         a_min = remember("a_min_m", p.number("Radius of the smallest drop [m]", a.get("a_min_m", args.a_min_m)))
         plan, _pitch, _fns = session.plan(pixel_pitch_m=pitch, f_numbers=fns, a_min_m=a_min)
         print(plan.summary())
+        shown.add("focus")
         z0 = p.number("Focus distance you set on the lens [m]", f"{plan.focus_distance_m:.4g}")
         n = p.number("F-number you set on the lens", f"{plan.f_number:g}")
         return session.run_focus(pixel_pitch_m=pitch, f_numbers=fns, a_min_m=a_min,
@@ -717,7 +737,7 @@ def _demo(args, out: Path) -> int:
         pp = g["principal_point_px"]
         tp = truth["geometry"]["principal_point_px"]
         print(f"principal pt  ({pp[0]:.1f}, {pp[1]:.1f}) px (true ({tp[0]:.1f}, {tp[1]:.1f}))")
-        print(f"response      {session.results['response']['provenance']['gamma']:.2f} "
+        print(f"response      gamma {session.results['response']['provenance']['gamma']:.2f} "
               f"(true: {truth['bracket']['response']})")
         print(f"noise sigma   {session.results['noise']['camera']['noise_sigma_dn']:.3f} gray levels, linear "
               f"(true {truth['still']['sigma_dn']:.3f})")
@@ -731,10 +751,19 @@ def _demo(args, out: Path) -> int:
     return 0
 
 
+def _check_out_dir(out: Path) -> None:
+    from raingauge.errors import InputError
+
+    if not out.parent.is_dir():
+        raise InputError(f"output folder {out.parent} does not exist. Fix: create it or choose another --out")
+
+
 def run(args: argparse.Namespace) -> int:
     from raingauge.errors import InputError
 
     out = Path(args.out) if args.out else None
+    if out is not None:
+        _check_out_dir(out)
     if args.demo:
         if out is None:
             raise InputError("--demo needs --out PROFILE.toml")

@@ -231,8 +231,9 @@ class ModbusOutput:
             self.requests_refused += 1
             return ExcCodes.ILLEGAL_VALUE
         loop = asyncio.get_running_loop()
+        by_addr = {h.address: h.name for h in HOLDING_REGISTERS}
         for i, v in enumerate(values):
-            name = HOLDING_REGISTERS[address + i].name
+            name = by_addr[address + i]
             if name == "reset":
                 # After the reply has echoed the value: read back 0 again.
                 loop.call_soon(registers.__setitem__, 0 - start_address, 0)

@@ -24,7 +24,7 @@ DIST = (-0.12, 0.05, 0.0005, -0.0004, 0.0)
 @pytest.fixture(scope="module")
 def views():
     images, truth = render_checkerboard_views(n_views=8, image_size=(400, 300), focal_length_px=TRUE_F,
-                                              distortion=DIST, supersample=2, seed=3)
+                                              distortion=DIST, seed=3)
     return images, truth
 
 
@@ -65,7 +65,7 @@ def test_too_few_views_says_how_many_more(views):
 
 def test_square_on_views_do_not_determine_f():
     images, _ = render_checkerboard_views(n_views=6, image_size=(400, 300), focal_length_px=TRUE_F,
-                                          max_tilt_deg=2.0, supersample=2, seed=5)
+                                          max_tilt_deg=2.0, seed=5)
     with pytest.raises(GeometryQualityError, match="tilted"):
         calibrate_views([(f"v{i}", im) for i, im in enumerate(images)], (9, 6), 0.025)
 

@@ -21,7 +21,7 @@ from raingauge.profile import load_profile
 @pytest.fixture(scope="module")
 def captures(tmp_path_factory):
     folder = tmp_path_factory.mktemp("captures")
-    truth = write_demo_captures(folder, seed=7, image_size=(320, 240), n_views=7)
+    truth = write_demo_captures(folder, seed=7)
     return folder, truth
 
 

@@ -10,8 +10,8 @@ import pytest
 from scipy.ndimage import binary_erosion
 
 from raingauge.cli import main
-from raingauge.render.closeup import (closeup_streak, light_direction, light_scene,
-                                      render_closeup_drop, render_closeup_streak)
+from raingauge.render.closeup import (cached_closeup_streak, closeup_streak, light_direction,
+                                      light_scene, render_closeup_drop, render_closeup_streak)
 from raingauge.render.oscillation import OscillatingDrop, rayleigh_frequency_hz
 
 A = 1.5e-3            # drop radius [m]
@@ -114,15 +114,17 @@ def _period_of(profile, guess):
     return lags[j] + 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
 
 
-@pytest.mark.parametrize("frequency_scale", [1.0, 1.6])
-def test_pattern_spacing_is_fall_distance_per_period(frequency_scale):
+@pytest.mark.parametrize("frequency_scale, view_theta", [(1.0, 0.0), (1.6, 0.4)])
+def test_pattern_spacing_is_fall_distance_per_period(frequency_scale, view_theta):
     f = rayleigh_frequency_hz(A) * frequency_scale
     scale = WIDTH / (2 * A)
-    speed = 37.3 * f / scale / frequency_scale          # 37.3 px per period at the Rayleigh rate
+    # 37.3 px per period at the Rayleigh rate, seen from the side
+    speed = 37.3 * f / scale / frequency_scale / math.cos(view_theta)
     s = closeup_streak(A, length_px=WIDTH + 3.3 * 37.3, width_px=WIDTH, light_dir=BACKLIGHT,
                        light_size_rad=LIGHT_SIZE, amp_axisymmetric=0.08, amp_transverse=0.05,
-                       frequency_hz=f, fall_speed_m_s=speed, supersample=2)
-    expected = speed * scale / f
+                       frequency_hz=f, fall_speed_m_s=speed, view_theta=view_theta, supersample=2)
+    # the fall per period, v / f, foreshortened by the camera's elevation, in pixels
+    expected = speed / f * math.cos(view_theta) * scale
     assert s.period_px == pytest.approx(expected)
     assert s.period_px == pytest.approx(37.3 / frequency_scale)
     body = s.radiance[int(WIDTH) + 2:-int(WIDTH) - 2]
@@ -155,11 +157,44 @@ def test_no_drop_is_brighter_than_its_light(still_streak):
         assert rad.sum() == pytest.approx(0.3 * cov.sum(), rel=0.01)
 
 
+def test_environment_map_lighting():
+    # a uniform environment map (no light): the drop vanishes into it, at any instant
+    env = np.full((32, 64), 0.2)
+    s = closeup_streak(1e-3, length_px=18, width_px=6, light_dir=None, environment=env, ambient=0.0,
+                       amp_axisymmetric=0.1, supersample=2)
+    body = s.coverage > 0.999
+    np.testing.assert_allclose(s.radiance[body], 0.2, atol=2e-3)
+    assert np.all(s.radiance <= 0.2 * s.coverage + 1e-6)
+    # a bright upper sky seen through the drop lights its lower part (the drop inverts)
+    env[:16] = 1.0
+    drop = OscillatingDrop(1e-3)
+    rad, cov = render_closeup_drop(drop, width_px=20, scene=light_scene(None, ambient=0.0, environment=env),
+                                   supersample=2)
+    inside = cov == 1.0
+    rows = np.nonzero(inside.any(axis=1))[0]
+    upper = rad[rows[:len(rows) // 3]][inside[rows[:len(rows) // 3]]].mean()
+    lower = rad[rows[-len(rows) // 3:]][inside[rows[-len(rows) // 3:]]].mean()
+    assert lower > upper + 0.3
+
+
 def test_render_closeup_streak_returns_the_radiance_patch():
     patch = render_closeup_streak(1e-3, length_px=20, width_px=6, light_dir=BACKLIGHT, view_theta=0.1,
                                   supersample=1)
-    assert patch.dtype == np.float32 and patch.shape[0] == 22 and patch.shape[1] >= 8
+    assert patch.dtype == np.float32 and patch.shape[0] >= 22 and patch.shape[1] >= 8
     assert patch.max() > 0
+    a = cached_closeup_streak(1e-3, length_px=20, width_px=6, light_dir=BACKLIGHT, view_theta=0.1,
+                              supersample=1)
+    # the drop's centre moves by the fall; its whole image stays inside the patch
+    assert a.centre_end_px[1] - a.centre_start_px[1] == pytest.approx(a.fall_px)
+    assert a.fall_px == pytest.approx(20 - 6, abs=0.25)
+    assert a.coverage[0].max() == 0 and a.coverage[-1].max() == 0
+    assert a.coverage[:, 0].max() == 0 and a.coverage[:, -1].max() == 0
+    rows = np.nonzero(a.coverage.max(axis=1) > 0)[0]
+    assert rows[0] < a.centre_start_px[1] - 2 and rows[-1] > a.centre_end_px[1] + 2
+    assert cached_closeup_streak(1e-3, length_px=20, width_px=6, light_dir=BACKLIGHT, view_theta=0.1,
+                                 supersample=1) is a
+    np.testing.assert_array_equal(a.radiance, patch)
+    assert not a.radiance.flags.writeable
     with pytest.raises(ValueError, match="length_px"):
         render_closeup_streak(1e-3, length_px=4, width_px=6, light_dir=BACKLIGHT, view_theta=0.0)
     with pytest.raises(ValueError, match="not both"):
@@ -172,8 +207,16 @@ def test_render_streak_cli(tmp_path, capsys):
                  "--view-theta", "5", "--length-px", "30", "--width-px", "6", "--supersample", "1",
                  "--out", str(out)]) == 0
     img = cv2.imread(str(out), cv2.IMREAD_GRAYSCALE)
-    assert img.shape[0] == 32 and img.max() == 255
+    assert 32 <= img.shape[0] <= 36 and img.max() == 255
     assert "pattern period" in capsys.readouterr().out
+    env = tmp_path / "sky.png"
+    cv2.imwrite(str(env), np.tile(np.linspace(255, 0, 16, dtype=np.uint8)[:, None], (1, 32)))
+    npy = tmp_path / "s.npy"
+    assert main(["render-streak", "--radius-mm", "1", "--no-light", "--envmap", str(env), "--length-px", "20",
+                 "--width-px", "6", "--supersample", "1", "--out", str(out), "--npy", str(npy)]) == 0
+    radiance, coverage = np.load(npy)
+    assert radiance.shape == coverage.shape and 22 <= radiance.shape[0] <= 26
+    assert np.all(radiance <= coverage * (1.0 + 0.05) + 1e-6)     # map peak 1 + ambient 0.05
 
 
 @pytest.mark.parametrize("args, message", [

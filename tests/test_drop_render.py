@@ -131,6 +131,15 @@ def test_drop_view_cli(tmp_path, drop_in_canvas, capsys):
     assert main(["drop-view", str(src), "--out", str(out2), "--center", f"{cx}", f"{cy}",
                  "--radius", f"{r}", "--size", "64"]) == 0
     assert cv2.imread(str(out2), cv2.IMREAD_UNCHANGED).shape == (64, 64)
+    # colour and 16-bit images keep their channels and depth
+    colour = tmp_path / "drop_rgb.png"
+    cv2.imwrite(str(colour), np.dstack([np.clip(canvas, 0, 255).astype(np.uint8)] * 3))
+    assert main(["drop-view", str(colour), "--out", str(out2), "--size", "48"]) == 0
+    assert cv2.imread(str(out2), cv2.IMREAD_UNCHANGED).shape == (48, 48, 3)
+    deep = tmp_path / "drop16.png"
+    cv2.imwrite(str(deep), (np.clip(canvas, 0, 255) * 257).astype(np.uint16))
+    assert main(["drop-view", str(deep), "--out", str(out2), "--size", "48"]) == 0
+    assert cv2.imread(str(out2), cv2.IMREAD_UNCHANGED).dtype == np.uint16
 
 
 @pytest.mark.parametrize("args, message", [

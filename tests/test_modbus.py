@@ -304,3 +304,45 @@ def test_server_in_its_own_process_same_interface():
             ModbusProcess(tcp=("127.0.0.1", busy.getsockname()[1])).start()
     finally:
         busy.close()
+
+
+CHILD = r"""
+import sys, time
+from firmware_interface.modbus import ModbusProcess
+out = ModbusProcess(tcp=("127.0.0.1", 0)).start()
+print(out.tcp_port, out._proc.pid, flush=True)
+time.sleep(60)
+"""
+
+
+def test_server_process_exits_when_the_instrument_is_killed(tmp_path):
+    """After kill -9 of the instrument the server process frees the port, so a restart can bind it."""
+    import signal
+    import subprocess
+    import sys
+
+    script = tmp_path / "child.py"
+    script.write_text(CHILD)
+    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    try:
+        port, child_pid = (int(v) for v in proc.stdout.readline().split())
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+    finally:
+        proc.stdout.close()
+
+    def gone():
+        try:
+            os.kill(child_pid, 0)
+        except ProcessLookupError:
+            return True
+        try:  # a zombie waiting for its (dead) parent counts as gone
+            return open(f"/proc/{child_pid}/stat").read().split(")")[1].split()[0] == "Z"
+        except OSError:
+            return True
+
+    assert _wait_for(gone, timeout=10)
+    with socket.socket() as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        s.bind(("127.0.0.1", port))
+        s.listen()

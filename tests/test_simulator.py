@@ -147,10 +147,10 @@ def test_exposure_area_is_conserved_and_partial_pixels_add_up():
     area = rng.uniform(0.05, 20.0, 60)
     for i in range(60):
         beta, beta_in = render_streaks((100, 100), p0[i:i + 1], p1[i:i + 1], r[i:i + 1], area[i:i + 1])
-        assert beta.sum() == pytest.approx(area[i], rel=2e-5)
-        assert beta.max() <= beta_in[0] * (1 + 1e-5)
+        assert beta.sum() == pytest.approx(area[i], rel=1e-4)
+        assert beta.max() <= beta_in[0] * (1 + 1e-4)
     beta, _ = render_streaks((100, 100), p0, p1, r, area)
-    assert beta.sum() == pytest.approx(area.sum(), rel=2e-5)
+    assert beta.sum() == pytest.approx(area.sum(), rel=1e-4)
 
 
 # ------------------------------------------------------------------ statistics
@@ -421,7 +421,7 @@ def test_cli_writes_video_and_truth(tmp_path, capsys):
     video = read_frames(out)
     assert video.shape == (12, 96, 128)
     truth = json.loads((tmp_path / "rain.mkv.truth.json").read_text())
-    assert truth["camera"]["width_px"] == 128 and truth["frames"] == 12
+    assert truth["camera"]["width_px"] == 128 and truth["n_frames"] == 12
     assert len(truth["frames_truth"]) == 12 and truth["windows"]
     masks = read_frames(tmp_path / "rain.masks.mkv")
     assert masks.shape == video.shape and set(np.unique(masks)) <= {0, 255}

@@ -14,8 +14,11 @@ the usual disdrometer definitions ([Testud2001] for Nw).
 The 95 % interval of the rate is that of a compound Poisson sum: with
 c_i the rate contributions, n_eff = (sum c)^2 / sum c^2 drops of equal
 contribution give the same variance, and the exact (Garwood) Poisson interval
-on n_eff, scaled, brackets the rate; a relative systematic term (the sample
-volume's calibration) is added in quadrature.
+on n_eff, scaled, brackets the rate.  The sum is skewed (a few large drops
+carry much of it), so the upper limit uses the variance with two more drops
+like the largest seen, which restores the coverage of windows that missed
+the rare large drops (tests/test_gauge_products.py); a relative systematic
+term (the sample volume's calibration) is added in quadrature.
 """
 
 from __future__ import annotations
@@ -138,10 +141,13 @@ def rate_interval(contributions, *, empty_scale: float = 0.0, systematic_rel: fl
     if c.size == 0:
         return 0.0, float(poisson_interval(0.0, level=level)[1] * empty_scale)
     total = float(c.sum())
-    n_eff = total ** 2 / float(np.sum(c ** 2))
-    scale = total / n_eff
-    lo, hi = poisson_interval(n_eff, level=level)
-    lo, hi = lo * scale, hi * scale
+    s2 = float(np.sum(c ** 2))
+    n_eff = total ** 2 / s2
+    lo = poisson_interval(n_eff, level=level)[0] * total / n_eff
+    # the sum is skewed by rare large drops: a window that happened to miss them reads low,
+    # so the upper side uses the variance with two more drops like the largest one seen
+    n_up = total ** 2 / (s2 + 2.0 * float(c.max()) ** 2)
+    hi = poisson_interval(n_up, level=level)[1] * total / n_up
     # add the systematic part in quadrature on each side
     dlo = math.hypot(total - lo, z * systematic_rel * total)
     dhi = math.hypot(hi - total, z * systematic_rel * total)

@@ -374,8 +374,9 @@ class Instrument:
     on_record : called with every record (printing); exceptions are logged
     gauge_factory : builds the gauge (default :func:`make_gauge`)
     wall_t0 : [s since epoch] wall-clock time of the instrument clock's zero
-    modbus : the :class:`firmware_interface.modbus.ModbusOutput` among ``outputs``
-        (for status updates between records), optional
+    accumulator : :class:`Accumulator` to continue (restored from the history database)
+    modbus : the Modbus output among ``outputs`` (for status updates between records), optional
+    settings_extra : more settings stored with every record (e.g. the Modbus unit id)
     """
 
     def __init__(self, profile, grabber, *, window_s: float = 60.0, step_s: float = 10.0,
@@ -406,6 +407,7 @@ class Instrument:
         self.missing_records = 0
         self.frames = 0
         self.output_errors = 0
+        self.gauge_errors = 0
         self._stop = threading.Event()
         self._pending_window: float | None = None
         self._ring: collections.deque = collections.deque(maxlen=max(3, int(diagnostics_frames)))
@@ -415,7 +417,6 @@ class Instrument:
         self._last_end_s = 0.0
         self._camera_ok = False
         self._next_diag_s = min(30.0, diagnostics_interval_s)
-        self._t_now = 0.0
         self._last_rate_mm_h = math.nan
         self._last_status = 0
         self._published_status = -1
@@ -523,8 +524,9 @@ class Instrument:
             self._emit(rec)
 
     def _set_camera(self, ok: bool) -> None:
-        self._camera_ok = ok
-        self._refresh_status()
+        if ok != self._camera_ok:
+            self._camera_ok = ok
+            self._refresh_status()
 
     def _refresh_status(self) -> None:
         """Publish status changes between records (camera lost, storage fault) to Modbus."""
@@ -569,8 +571,8 @@ class Instrument:
                             log.warning("no frames for %.0f s: camera lost; records are marked missing",
                                         self.stall_timeout_s)
                             self._set_camera(False)
-                            if self._gauge is not None:
-                                self._gauge = None  # a window across the gap would be wrong
+                            self._gauge = None  # a window across the gap would be wrong
+                            self._frames_in_step = 0
                         if lost:
                             self._emit_missing(now_s)
                         if duration_s is not None and now_s >= duration_s:
@@ -586,12 +588,14 @@ class Instrument:
                     lost = False
                     self._new_gauge(t_s if self.frames else 0.0)
                 self._set_camera(True)
-                self._t_now = t_s
                 lin = self.profile.linearize(frame)
                 try:
                     records = self._gauge.process(lin, t_s=t_s)
-                except Exception:
-                    log.exception("gauge failed on a frame at t = %.2f s; frame skipped", t_s)
+                except Exception:  # noqa: BLE001 - one bad frame must not end months of measuring
+                    self.gauge_errors += 1
+                    if self.gauge_errors == 1 or self.gauge_errors % 1000 == 0:
+                        log.exception("gauge failed on a frame at t = %.2f s (%d so far); frame skipped",
+                                      t_s, self.gauge_errors)
                     records = []
                 self.frames += 1
                 self._frames_in_step += 1
@@ -639,6 +643,7 @@ class Instrument:
             "frames": self.frames,
             "corrupt_frames": self.grabber.corrupt_frames + self.grabber.source_corrupt_frames,
             "reconnects": self.grabber.reconnects,
+            "gauge_errors": self.gauge_errors,
             "history_written": None if self.history_writer is None else self.history_writer.written,
             "history_pending": None if self.history_writer is None else self.history_writer.pending(),
             "accumulation_mm": self.accumulator.state()["accumulation_mm"],

@@ -41,7 +41,7 @@ __all__ = [
 # --------------------------------------------------------------------------------------
 
 def fresnel_reflectance(incidence_rad, mu):
-    """Fresnel reflectance k(i, mu) for unpolarised light (note 5 [GargNayar2007]).
+    """Fresnel reflectance k(i, mu) for unpolarised light (note 5 [GargNayar2007]; [BornWolf1999]).
 
     Parameters
     ----------
@@ -117,6 +117,11 @@ def image_radius(theta_n, *, radius_m, z_m, focal_length_px):
         Distance of the drop from the camera [m].
     focal_length_px : float
         Effective focal length f [px].
+
+    Notes
+    -----
+    The text prints "rho = (f/z), a sin theta_n"; the comma is a typesetting
+    slip for the product (f / z) a sin(theta_n).
     """
     return focal_length_px / z_m * radius_m * np.sin(np.asarray(theta_n, dtype=float))
 
@@ -418,6 +423,14 @@ def drop_field_of_view(mu=MU_WATER):
     ----------
     mu : float
         Refractive index of the drop [-].
+
+    Notes
+    -----
+    The text takes the maximum "over all possible angles 0 <= theta_n <= 90 deg";
+    with its own frame (z away from the camera, i = pi - theta_n) the visible
+    normals are pi/2 <= theta_n <= pi, i.e. incidence angles 0 to 90 deg, which is
+    what is meant.  For mu > sqrt(2) the field exceeds 180 deg (acrylic,
+    mu = 1.49: 191 deg): such a ball sees slightly behind itself.
     """
     return 2.0 * (np.pi - 2.0 * np.arcsin(1.0 / mu))
 

@@ -20,13 +20,23 @@ back-lighting, ``phi_l`` is measured in the image plane from image-right towards
 
 Patch layout.  ``width_px`` is the image diameter of the volume-equivalent
 sphere (2 a) and sets the scale; the drop's centre moves down by
-``length_px - width_px`` pixels during the exposure, from ``width_px / 2`` below
-the top edge.  The patch is ``(ceil(length_px) + 2, ceil(width_px * r_max / a) + 2)``.
+``length_px - width_px`` pixels during the exposure, from ``pad + width_px / 2``
+below the top edge (``CloseupStreak.centre_start_px`` / ``centre_end_px``).  The
+patch is ``(ceil(length_px) + 2 pad, ceil(width_px * r_max / a) + 2)`` with
+``pad = 1 + ceil((r_max / a - 1) width_px / 2)``, r_max the drop's largest radius.
 Compose a streak on a background E_b as ``E = E_b (1 - coverage) + radiance``.
+
+Use in the rain simulator.  Radiance comes out in the unit of the lighting:
+with ``light_dir=None, ambient=E_sky`` (overcast) or an environment map in
+gray levels (bright sky above, the scene's brightness below and behind), the
+streak is in gray levels and composes directly onto the linear frame.  A
+streak takes seconds to trace; :func:`cached_closeup_streak` memoises streaks
+for repeated (quantised) sizes and directions.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -37,7 +47,7 @@ from raingauge.render.oscillation import OscillatingDrop
 from raingauge.render.raytrace import trace
 
 __all__ = ["CloseupStreak", "viewing_frame", "light_direction", "light_scene",
-           "render_closeup_drop", "closeup_streak", "render_closeup_streak"]
+           "render_closeup_drop", "closeup_streak", "render_closeup_streak", "cached_closeup_streak"]
 
 
 def viewing_frame(view_theta: float):
@@ -184,6 +194,8 @@ class CloseupStreak:
     coverage : float32 (H, W)  fraction of the exposure the drop covers each pixel.
     fall_px : float            distance the drop's centre moves during the exposure [px]
                                (the requested length rounded to the time lattice).
+    centre_start_px, centre_end_px : (col, row) of the drop's centre in the patch at the
+                               start and the end of the exposure [px].
     period_px : float          fall distance per oscillation period [px].
     frequency_hz : float       oscillation frequency [Hz].
     fall_speed_m_s : float     fall speed [m/s].
@@ -195,6 +207,8 @@ class CloseupStreak:
     coverage: np.ndarray
     fall_px: float
     period_px: float
+    centre_start_px: tuple
+    centre_end_px: tuple
     frequency_hz: float
     fall_speed_m_s: float
     exposure_s: float
@@ -314,10 +328,12 @@ def closeup_streak(radius_m: float, *, length_px: float, width_px: float,
                         light_size_rad=light_size_rad, environment=environment,
                         view_theta=view_theta)
 
-    h = int(math.ceil(length_px)) + 2
+    # margins hold the drop's largest extent (oblate, oscillating) beyond its radius a
+    pad = 1 + int(math.ceil(max(0.0, drop.max_radius_m / radius_m - 1.0) * width_px / 2.0))
+    h = int(math.ceil(length_px)) + 2 * pad
     w = int(math.ceil(width_px * drop.max_radius_m / radius_m)) + 2
     cx = (w - 1) / 2.0
-    y_start = 1.0 + width_px / 2.0 - 0.5                   # centre row at t = 0
+    y_start = pad + width_px / 2.0 - 0.5                   # centre row at t = 0
     # instants on a lattice of exactly 1/rate px of fall: every row then sees the drop
     # at the same sub-pixel phases, so the time average has no beat along the streak
     rate = float(time_samples_per_px) if time_samples_per_px else 2.0 * int(supersample)
@@ -357,6 +373,7 @@ def closeup_streak(radius_m: float, *, length_px: float, width_px: float,
     return CloseupStreak(radiance=(radiance * norm).reshape(h, w).astype(np.float32),
                          coverage=(coverage * norm).reshape(h, w).astype(np.float32),
                          fall_px=fall_px, period_px=float(period_px),
+                         centre_start_px=(cx, y_start), centre_end_px=(cx, y_start + fall_px),
                          frequency_hz=float(drop.frequency_hz), fall_speed_m_s=float(speed),
                          exposure_s=float(exposure_s), max_scene_radiance=scene.max_radiance)
 
@@ -371,3 +388,27 @@ def render_closeup_streak(radius_m: float, *, length_px: float, width_px: float,
     """
     return closeup_streak(radius_m, length_px=length_px, width_px=width_px, light_dir=light_dir,
                           view_theta=view_theta, **kw).radiance
+
+
+@functools.lru_cache(maxsize=64)
+def _cached_streak(radius_m, length_px, width_px, light_dir, view_theta, options):
+    streak = closeup_streak(radius_m, length_px=length_px, width_px=width_px, light_dir=light_dir,
+                            view_theta=view_theta, **dict(options))
+    streak.radiance.flags.writeable = False
+    streak.coverage.flags.writeable = False
+    return streak
+
+
+def cached_closeup_streak(radius_m: float, *, length_px: float, width_px: float,
+                          light_dir=(math.radians(60.0), math.radians(90.0)),
+                          view_theta: float = 0.0, **kw) -> CloseupStreak:
+    """:func:`closeup_streak`, memoised (64 streaks) on its arguments; the arrays are read-only.
+
+    All arguments must be hashable (no environment map); quantise sizes and
+    angles before calling to reuse streaks between drops.
+    """
+    if "environment" in kw:
+        raise ValueError("cached_closeup_streak cannot take an environment map; call closeup_streak")
+    ld = None if light_dir is None else tuple(float(v) for v in np.ravel(light_dir))
+    return _cached_streak(float(radius_m), float(length_px), float(width_px), ld, float(view_theta),
+                          tuple(sorted(kw.items())))

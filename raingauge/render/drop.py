@@ -147,6 +147,13 @@ def render_drop(env, *, size_px: int, alpha_rad: float = 0.0, azimuth_rad: float
     -------
     (image, coverage) : float32 (M, N[, C]) radiance and float32 (M, N) fraction of each
         pixel covered by the drop.
+
+    Notes
+    -----
+    The image is drawn on the plane perpendicular to the viewing ray, rows along
+    the rotated camera y axis (:func:`view_rotation`), so the drop is a circle; on
+    the camera's image plane an off-axis drop is that circle seen obliquely, an
+    ellipse related to it by a projective mapping (footnote 4 [GargNayar2007]).
     """
     if method not in RENDER_METHODS:
         raise ValueError(f"unknown method {method!r}; valid: {list(RENDER_METHODS)}")
@@ -371,13 +378,18 @@ def drop_to_perspective(image, *, center_xy, radius_px: float, fov_deg: float = 
     phi_r = np.arctan2(y - c, x - c)
     theta_n = optics.normal_theta_from_refraction(theta_r, mu)
     rho = radius_px * np.sin(theta_n)
+    outside = ~np.isfinite(rho)              # beyond the drop's own field of view
+    rho = np.where(outside, 0.0, rho)
     map_x = (center_xy[0] + rho * np.cos(phi_r - np.pi)).astype(np.float32)
     map_y = (center_xy[1] + rho * np.sin(phi_r - np.pi)).astype(np.float32)
+    map_x[outside] = -1e6
+    map_y[outside] = -1e6
     src = img.astype(np.float32)
     out = cv2.remap(src, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                     borderValue=0)
     if flatten:
         # R falls to 0 at grazing incidence: cap the gain at 10 (R >= 0.1)
+        theta_n = np.where(outside, np.pi, theta_n)
         gain = 1.0 / np.maximum(optics.transfer_refraction(np.pi - theta_n, mu), 0.1)
         out = out * (gain[..., None] if out.ndim == 3 else gain)
     return out.astype(np.float32)

@@ -246,8 +246,22 @@ def _capsule_spans(y, x0, y0, x1, y1, r):
     return lo, hi
 
 
+_SCRATCH: dict = {}
+
+
+def _scratch(m: int, width: int):
+    """Reusable accumulation buffers for one image size (not thread-safe)."""
+    key = (m, width)
+    if key not in _SCRATCH:
+        if len(_SCRATCH) > 8:
+            _SCRATCH.clear()
+        _SCRATCH[key] = (np.zeros(m * width, np.float32), np.zeros((m, width), np.float32),
+                         np.zeros((m + 1, width + 1), np.float32))
+    return _SCRATCH[key]
+
+
 def render_streaks(shape, p0, p1, radius_px, area_px, *, n_sub: int = 2,
-                   max_rows_factor: float = 4.0):
+                   max_rows_factor: float = 4.0, _view: bool = False):
     """Exposure fractions of motion-blurred, defocused streaks, Eqs. (15)-(17), (23).
 
     Each streak is a capsule (radius ``radius_px`` around the segment p0-p1)
@@ -272,6 +286,8 @@ def render_streaks(shape, p0, p1, radius_px, area_px, *, n_sub: int = 2,
     max_rows_factor : float
         Capsules taller than this many image heights are normalised by their
         analytic area and rasterised on the image rows only.
+    _view : bool
+        Return a view into scratch memory, valid until the next call (internal).
 
     Returns
     -------
@@ -280,6 +296,8 @@ def render_streaks(shape, p0, p1, radius_px, area_px, *, n_sub: int = 2,
     beta_inside : ndarray, shape (n,)
         Exposure fraction of a pixel fully inside each streak (its beta, Eq. 18).
     """
+    import cv2
+
     m, n = int(shape[0]), int(shape[1])
     p0 = np.asarray(p0, dtype=np.float64).reshape(-1, 2)
     p1 = np.asarray(p1, dtype=np.float64).reshape(-1, 2)
@@ -308,33 +326,35 @@ def render_streaks(shape, p0, p1, radius_px, area_px, *, n_sub: int = 2,
     starts = np.cumsum(counts) - counts
     nsp = ns[idx]
     j = np.arange(total) - np.repeat(starts - j_lo, counts)
-    ys = (j + 0.5) / nsp - 0.5
-    xl, xr = _capsule_spans(ys, x0[idx], y0[idx], x1[idx], y1[idx], r[idx])
-    seg = np.maximum(xr - xl, 0.0) / nsp
+    ys = ((j + 0.5) / nsp - 0.5).astype(np.float32)
+    f32 = np.float32
+    xl, xr = _capsule_spans(ys, x0.astype(f32)[idx], y0.astype(f32)[idx], x1.astype(f32)[idx],
+                            y1.astype(f32)[idx], r.astype(f32)[idx])
+    seg = np.maximum(xr - xl, f32(0.0)) / nsp
     cover = np.bincount(idx, weights=seg, minlength=count)
     length = np.hypot(x1 - x0, y1 - y0)
     analytic = 2.0 * r * length + math.pi * r * r
     cover = np.where(huge | (cover <= 0), analytic, cover)
     beta_inside = area / cover
     # keep spans on image rows that reach into the image
-    row = np.floor(ys + 0.5).astype(np.int64)
+    row = np.floor(ys + f32(0.5)).astype(np.int64)
     keep = (seg > 0) & (row >= 0) & (row < m) & (xr > -0.5) & (xl < n - 0.5)
     if not np.any(keep):
         return np.zeros((m, n), np.float32), beta_inside
-    wgt = beta_inside[idx[keep]] / nsp[keep]
+    wgt = (beta_inside[idx[keep]] / nsp[keep]).astype(np.float32)
     width = n + 2
     base = row[keep] * width
-    a = xl[keep] + 0.5
-    b = xr[keep] + 0.5
+    a = xl[keep] + f32(0.5)
+    b = xr[keep] + f32(0.5)
     ia = np.floor(a)
     ib = np.floor(b)
     fa = a - ia
     fb = b - ib
     # second-difference form of the pixel coverage of [xl, xr] on each row: four
-    # entries per span, summed along the row below (each row's entries sum to 0)
+    # entries per span; summing along the row gives the coverage (each row's entries sum to 0)
     nk = wgt.size
     flat = np.empty(4 * nk, np.int64)
-    vals = np.empty(4 * nk)
+    vals = np.empty(4 * nk, np.float32)
     ia = np.clip(ia, -1, n).astype(np.int64)
     ib = np.clip(ib, -1, n).astype(np.int64)
     flat[:nk] = base + np.maximum(ia, 0)
@@ -345,13 +365,22 @@ def render_streaks(shape, p0, p1, radius_px, area_px, *, n_sub: int = 2,
     vals[nk:2 * nk] = wgt * fa
     vals[2 * nk:3 * nk] = -wgt * (1.0 - fb)
     vals[3 * nk:] = -wgt * fb
-    acc = np.bincount(flat, weights=vals, minlength=m * width).reshape(m, width)
-    out = np.cumsum(acc, axis=1, dtype=np.float32)[:, :n]
-    np.maximum(out, 0.0, out=out)  # round-off
+    acc, diff, integral = _scratch(m, width)
+    acc.fill(0.0)
+    np.add.at(acc, flat, vals)
+    acc2 = acc.reshape(m, width)
+    # row sums by OpenCV's integral image of the rows' differences: the integral of
+    # A[y] - A[y-1] over y' <= y, x' <= x is the sum of A[y, x'] over x' <= x
+    diff[0] = acc2[0]
+    np.subtract(acc2[1:], acc2[:-1], out=diff[1:])
+    cv2.integral(diff, integral, sdepth=cv2.CV_32F)
+    out = integral[1:, 1:n + 1]
+    if not _view:
+        out = out.copy()
     return out, beta_inside
 
 
-def compose_rain(background, beta, *, drop_brightness_dn: float = DEFAULT_DROP_BRIGHTNESS_DN):
+def compose_rain(background, beta, *, drop_brightness_dn: float = DEFAULT_DROP_BRIGHTNESS_DN, out=None):
     """Rainy linear frame from the background and the streaks' exposure fractions, Eq. (17).
 
     I = I_b + beta (E_r - I_b), beta clipped to [0, 1].
@@ -364,13 +393,15 @@ def compose_rain(background, beta, *, drop_brightness_dn: float = DEFAULT_DROP_B
         Exposure fraction covered by drops (:func:`render_streaks`).
     drop_brightness_dn : float
         E_r, linear brightness of a drop [gray levels].
+    out : ndarray, shape (M, N), float32, optional
+        Where to write the result.
 
     Returns
     -------
     ndarray, shape (M, N), float32
     """
     bg = np.asarray(background, dtype=np.float32)
-    out = np.float32(drop_brightness_dn) - bg
+    out = np.subtract(np.float32(drop_brightness_dn), bg, out=out, dtype=np.float32)
     if beta.size and float(beta.max()) > 1.0:
         beta = np.minimum(beta, 1.0)
     out *= beta
@@ -975,7 +1006,7 @@ class Simulation:
             prof["pixel_pitch_m_assumed"] = self.pitch
         return {
             "camera": prof,
-            "frames": self.n_frames,
+            "n_frames": self.n_frames,
             "frame_rate_hz": self.fps,
             "seconds": self.seconds,
             "seed": self.seed,
@@ -1069,11 +1100,13 @@ class Simulation:
         clean_sensor = _Sensor(self.profile, noise_sigma_dn=0.0, jpeg_quality=None, rng=noise_rng)
         acc = self._truth_accumulator()
         shape = self.profile.shape
+        lin_buf = np.empty(shape, np.float32)
         for k in range(self.n_frames):
             idx, pa, caps = self._frame_drops(vol, k)
-            beta, beta_in = render_streaks(shape, caps["p0"], caps["p1"], caps["radius_px"], caps["area_px"])
+            beta, beta_in = render_streaks(shape, caps["p0"], caps["p1"], caps["radius_px"], caps["area_px"],
+                                           _view=True)
             bg = self.scene.frame(k)
-            lin = compose_rain(bg, beta, drop_brightness_dn=self.e_r)
+            lin = compose_rain(bg, beta, drop_brightness_dn=self.e_r, out=lin_buf)
             frame = sensor(lin, owned=not (self.truth_masks or self.truth_linear))
             self._accumulate(acc, vol, k)
             ft: dict[str, Any] = {"index": k, "t_s": k / self.fps}

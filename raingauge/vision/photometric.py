@@ -126,6 +126,7 @@ class Streak:
     residual_rms: float
     linear: bool
     slope_ok: bool
+    stationary: bool
     accepted: bool
     _labels: np.ndarray = dataclasses.field(repr=False, compare=False, default=None)
 
@@ -175,8 +176,10 @@ class StreakFits:
     alpha: np.ndarray           # Eq. (18) intercept [gray levels]
     beta_se: np.ndarray         # standard error of beta
     residual_rms: np.ndarray    # rms deviation from the line [gray levels]
+    background_change_rms: np.ndarray  # rms of I_{n-1} - I_{n+1} over the streak [gray levels]
     linear: np.ndarray          # bool: passes the linearity test
     slope_ok: np.ndarray        # bool: beta compatible with [0, beta_max]
+    stationary: np.ndarray      # bool: I_{n-1} = I_{n+1} along the streak (Eq. 19)
     accepted: np.ndarray        # bool: rain streak
 
     def __len__(self) -> int:
@@ -195,7 +198,8 @@ class StreakFits:
             max_change=float(self.max_change[i]), mean_background=float(self.mean_background[i]),
             beta=float(self.beta[i]), alpha=float(self.alpha[i]), beta_se=float(self.beta_se[i]),
             residual_rms=float(self.residual_rms[i]), linear=bool(self.linear[i]),
-            slope_ok=bool(self.slope_ok[i]), accepted=bool(self.accepted[i]), _labels=self.labels,
+            slope_ok=bool(self.slope_ok[i]), stationary=bool(self.stationary[i]),
+            accepted=bool(self.accepted[i]), _labels=self.labels,
         )
 
     def __iter__(self) -> Iterator[Streak]:
@@ -231,7 +235,9 @@ def fit_streaks(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, mask: np.nda
         of noise spikes); they do not appear in the fits.
     max_relative_residual : float
         A streak is linear when its rms residual from the fitted line is at most
-        ``residual_sigmas * sqrt(2) * noise_sigma + max_relative_residual * mean change``.
+        ``residual_sigmas * sqrt(2) * noise_sigma + max_relative_residual * mean change``;
+        the rms of I_{n-1} - I_{n+1} along it (the stationarity half of Eq. (19))
+        must stay within the same allowance.
     residual_sigmas : float
         Noise allowance of the linearity test [standard deviations].
     slope_sigmas : float
@@ -279,13 +285,15 @@ def _fit(prev, cur, nxt, mask, *, beta_max, labels, noise_sigma, min_pixels, max
     m = keep_ids.size
 
     x = prev.ravel()[idx].astype(np.float64)                           # background I_{n-1}
-    y = cur.ravel()[idx].astype(np.float64) - nxt.ravel()[idx]         # change against I_{n+1}
+    z = nxt.ravel()[idx].astype(np.float64)                            # background I_{n+1}
+    y = cur.ravel()[idx].astype(np.float64) - z                        # change against I_{n+1}
     cnt = np.bincount(lj, minlength=m).astype(np.float64)
     sx = np.bincount(lj, x, m)
     sy = np.bincount(lj, y, m)
     sxx = np.bincount(lj, x * x, m)
     sxy = np.bincount(lj, x * y, m)
     syy = np.bincount(lj, y * y, m)
+    sbb = np.bincount(lj, (x - z) ** 2, m)
     rr = (idx // cols).astype(np.float64)
     cc = (idx % cols).astype(np.float64)
     sr = np.bincount(lj, rr, m)
@@ -319,12 +327,16 @@ def _fit(prev, cur, nxt, mask, *, beta_max, labels, noise_sigma, min_pixels, max
     alpha = my - slope * mx
 
     noise_dn = residual_sigmas * math.sqrt(2.0) * float(noise_sigma)
-    linear = resid_rms <= noise_dn + max_relative_residual * np.maximum(my, 0.0)
+    allowance = noise_dn + max_relative_residual * np.maximum(my, 0.0)
+    linear = resid_rms <= allowance
+    # Eq. (19) also says I_{n-1} = I_{n+1} under a streak: the background is stationary.
+    bg_change = np.sqrt(sbb / safe)
+    stationary = bg_change <= allowance
     with np.errstate(invalid="ignore"):
         lo = beta - slope_sigmas * se
         hi = beta + slope_sigmas * se
     slope_ok = (hi >= 0.0) & (lo <= beta_max)
-    accepted = linear & slope_ok & (my > 0)
+    accepted = linear & slope_ok & stationary & (my > 0)
 
     # Geometry (centroid and second moments of the pixel positions).
     mr, mc = sr / safe, sc / safe
@@ -343,8 +355,8 @@ def _fit(prev, cur, nxt, mask, *, beta_max, labels, noise_sigma, min_pixels, max
         labels=lab, label=keep_ids.astype(np.int32), area=cnt.astype(np.int64), bbox=bbox,
         centroid=np.column_stack([mc, mr]), orientation_deg=orient, major_axis_px=major,
         minor_axis_px=minor, mean_change=my, max_change=ymax, mean_background=mx, beta=beta,
-        alpha=alpha, beta_se=se, residual_rms=resid_rms, linear=linear, slope_ok=slope_ok,
-        accepted=accepted,
+        alpha=alpha, beta_se=se, residual_rms=resid_rms, background_change_rms=bg_change, linear=linear,
+        slope_ok=slope_ok, stationary=stationary, accepted=accepted,
     )
     return fits, idx, lj
 

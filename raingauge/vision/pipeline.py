@@ -160,6 +160,10 @@ class Derainer:
     segment_every : int
         Recompute the direction field and segmentation every this many frames
         (it integrates f frames, so it changes slowly).
+    warmup : int, optional
+        Distinct frames gathered before the first output, so that the first
+        frames are segmented with a correlation built over several frames
+        (default f // 2; 0 gives the smallest latency, 3 frames).
     """
 
     LOOKAHEAD = 3
@@ -168,7 +172,7 @@ class Derainer:
                  motion: str = "translation", beta_max: float | None = None,
                  noise_sigma: float | str | None = None, min_pixels: int = 5, grow_px: int = 1,
                  runs: bool = True, repeat_tol: float = 0.1, tol: float | None = None,
-                 dynamics: dict | None = None, segment_every: int = 4):
+                 dynamics: dict | None = None, segment_every: int = 4, warmup: int | None = None):
         self.profile = profile
         if c is None:
             c = profile.detection_threshold_dn if profile is not None else 3.0
@@ -199,6 +203,7 @@ class Derainer:
         self._field: DynamicsField | None = None
         self._since_field = 0
         self.segment_every = int(segment_every)
+        self.warmup = self.f // 2 if warmup is None else int(warmup)
         self.streak_log: list[tuple[int, int]] = []   # (frame index, accepted streaks)
 
     # ----------------------------------------------------------------- helpers
@@ -258,7 +263,7 @@ class Derainer:
         if k >= 2:
             self._detect(k - 1, k - 2, k)
         out = []
-        while self._next_remove + self.LOOKAHEAD <= k:
+        while self._next_remove + self.LOOKAHEAD <= k and k >= self.warmup:
             out.extend(self._finish(self._next_remove, last=None))
             self._next_remove += 1
         return out
