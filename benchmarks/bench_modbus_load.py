@@ -83,6 +83,18 @@ def client_process(port: int, clients: int, hz: float, windows: list[tuple[float
 
 
 # ---------------------------------------------------------------------- the gauge
+def _cpu_s(pid) -> float:
+    """User + system CPU seconds of a process (Linux /proc)."""
+    import os
+
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+    except OSError:
+        return float("nan")
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=60.0, help="total polling time [s]")
@@ -115,11 +127,13 @@ def main() -> int:
     proc = ctx.Process(target=client_process, args=(modbus.tcp_port, args.clients, args.hz, windows, q))
     proc.start()
     counts: list[tuple[float, int]] = []
+    cpu: list[tuple[float, float, float]] = []   # CPU seconds: gauge process, server process, clients
 
     def sampler():
         for b in bounds:
             time.sleep(max(0.0, b - time.time()))
             counts.append((time.monotonic(), inst.frames))
+            cpu.append((_cpu_s("self"), _cpu_s(modbus._proc.pid), _cpu_s(proc.pid)))
         proc.join(60)
         inst.stop()
 
@@ -133,6 +147,13 @@ def main() -> int:
     loaded = [f for f, loaded in zip(fps, pattern) if loaded]
     drop = 1.0 - statistics.median(loaded) / statistics.median(quiet)
     print("frames/s per slice: " + " ".join(f"{'L' if l else 'q'}{f:.1f}" for f, l in zip(fps, pattern)))
+    spans = [counts[k + 1][0] - counts[k][0] for k in range(len(pattern))]
+    use = [[(cpu[k + 1][j] - cpu[k][j]) / spans[k] for j in range(3)] for k in range(len(pattern))]
+    for label, want in (("quiet", False), ("loaded", True)):
+        rows = [u for u, l in zip(use, pattern) if l == want]
+        g, srv, cl = (statistics.median(r[j] for r in rows) for j in range(3))
+        print(f"CPU in {label} slices [cores]: gauge process {g:.2f}, Modbus server process {srv:.3f}, "
+              f"client process {cl:.3f}")
     print(f"without clients : {statistics.median(quiet):.2f} frames/s (median of {len(quiet)} slices)")
     print(f"with {args.clients} clients at {args.hz:g} Hz: {statistics.median(loaded):.2f} frames/s "
           f"(drop {100 * drop:+.1f} %, target <= 10 %)")

@@ -56,17 +56,20 @@ class NoiseResult:
     levels_dn : (B,) float
         Mean linear intensity of each populated bin [gray levels].
     sigma_dn : (B,) float
-        Temporal noise standard deviation in each bin [gray levels].
+        Sensor noise standard deviation in each bin, quantisation removed [gray levels].
+    measured_sigma_dn : (B,) float
+        Temporal standard deviation of the frames as recorded (with the 8-bit
+        quantisation the detector also sees) [gray levels].
     counts : (B,) int
         Pixels per bin.
     noise_sigma_dn : float
-        RMS noise over all unclipped pixels [gray levels] (the profile's noise_sigma_dn).
+        RMS sensor noise over all unclipped pixels [gray levels] (the profile's noise_sigma_dn).
     read_sigma_dn : float
         Fitted intensity-independent noise [gray levels].
     shot_gain_dn : float
         Fitted shot-noise gain g in sigma^2 = read^2 + g I [gray levels].
     threshold_sigma_dn : float
-        The noise the threshold is set for: the largest per-bin sigma [gray levels].
+        The noise the threshold is set for: the largest measured per-bin sigma [gray levels].
     c_dn : float
         Detection threshold of Eq. (19) [gray levels].
     false_rate : float
@@ -79,6 +82,7 @@ class NoiseResult:
 
     levels_dn: np.ndarray
     sigma_dn: np.ndarray
+    measured_sigma_dn: np.ndarray
     counts: np.ndarray
     noise_sigma_dn: float
     read_sigma_dn: float
@@ -98,7 +102,8 @@ class NoiseResult:
     def summary(self) -> str:
         pairs = ", ".join(f"{lv:.0f}:{s:.2f}" for lv, s in zip(self.levels_dn, self.sigma_dn))
         lines = [
-            f"noise sigma       {self.noise_sigma_dn:.3f} gray levels RMS over {self.n_frames} frames",
+            f"noise sigma       {self.noise_sigma_dn:.3f} gray levels RMS over {self.n_frames} frames "
+            f"(sensor; {np.sqrt(np.mean(self.measured_sigma_dn ** 2)):.3f} as recorded in 8 bits)",
             f"noise model       sigma^2 = {self.read_sigma_dn:.3f}^2 + {self.shot_gain_dn:.4f} I",
             f"sigma by level    {pairs}",
             f"threshold c       {self.c_dn:.2f} gray levels (Eq. 19; {self.false_rate:.0e} false candidates "
@@ -118,12 +123,13 @@ class NoiseResult:
             "n_frames": self.n_frames,
             "levels_dn": [round(float(v), 2) for v in self.levels_dn],
             "sigma_by_level_dn": [round(float(v), 4) for v in self.sigma_dn],
+            "measured_sigma_by_level_dn": [round(float(v), 4) for v in self.measured_sigma_dn],
             "warnings": list(self.warnings),
         }
 
 
 def temporal_moments(frames: Iterable[np.ndarray], *, table: np.ndarray | None = None
-                     ) -> tuple[np.ndarray, np.ndarray, int]:
+                     ) -> tuple[np.ndarray, np.ndarray, int, bool]:
     """Per-pixel temporal mean and unbiased variance, one frame at a time.
 
     Parameters
@@ -139,14 +145,18 @@ def temporal_moments(frames: Iterable[np.ndarray], *, table: np.ndarray | None =
     var : (M*N,) [gray levels^2] (NaN when fewer than two frames)
     t : int
         Number of frames.
+    quantised : bool
+        True when the frames were 8-bit codes (their variance includes quantisation).
     """
     lut = None if table is None else np.asarray(table, dtype=np.float64)
     t = 0
+    quantised = False
     ref = s1 = s2 = None
     for frame in frames:
         frame = np.asarray(frame)
         if frame.ndim != 2:
             raise InputError(f"noise step: expected gray (M, N) frames, got shape {frame.shape}")
+        quantised = quantised or frame.dtype == np.uint8
         x = lut[frame] if (lut is not None and frame.dtype == np.uint8) else frame.astype(np.float64)
         x = x.ravel()
         if ref is None:
@@ -163,7 +173,25 @@ def temporal_moments(frames: Iterable[np.ndarray], *, table: np.ndarray | None =
         raise InputError("noise step: no frames. Fix: record a few seconds of the still scene")
     mean = ref + s1 / t
     var = (s2 - s1 * s1 / t) / (t - 1) if t > 1 else np.full_like(s1, np.nan)
-    return mean, np.maximum(var, 0.0), t
+    return mean, np.maximum(var, 0.0), t, quantised
+
+
+def code_step_dn(level_dn, table: np.ndarray | None = None) -> np.ndarray:
+    """Width of one 8-bit code in linear gray levels at a linear intensity.
+
+    Parameters
+    ----------
+    level_dn : array
+        Linear intensity [gray levels].
+    table : (256,) float, optional
+        Linearisation table [gray levels]; ``None`` for a linear camera (step 1).
+    """
+    level = np.asarray(level_dn, dtype=np.float64)
+    if table is None:
+        return np.ones_like(level)
+    table = np.asarray(table, dtype=np.float64)
+    codes = np.interp(level, table, np.arange(256.0))
+    return np.interp(codes, np.arange(256.0), np.gradient(table))
 
 
 def noise_curve(mean: np.ndarray, var: np.ndarray, *, n_bins: int = 16,
@@ -291,7 +319,7 @@ def calibrate_noise(frames: Iterable[np.ndarray], *, table: np.ndarray | None = 
     """
     if isinstance(frames, np.ndarray) and frames.ndim != 3:
         raise InputError(f"noise step: expected gray frames (T, M, N), got shape {frames.shape}")
-    mean, var, t = temporal_moments(frames, table=table)
+    mean, var, t, quantised = temporal_moments(frames, table=table)
     if t < MIN_FRAMES:
         raise InputError(
             f"noise step: {t} still frame(s); at least {MIN_FRAMES} are needed (20 or more give sigma within a few %). "
@@ -308,17 +336,24 @@ def calibrate_noise(frames: Iterable[np.ndarray], *, table: np.ndarray | None = 
             "Fix: record a scene of moderate brightness with the gauge's exposure"
         )
     warnings: list[str] = []
+    measured = sigma
+    # 8-bit codes add a quantisation variance of (code width)^2 / 12 (Sheppard's
+    # correction); the sensor's own noise is what is left.
+    q_var = code_step_dn(levels, table) ** 2 / 12.0 if quantised else np.zeros_like(levels)
+    sensor_var = np.maximum(measured ** 2 - q_var, 0.0)
     # Fit sigma^2 = r^2 + g I by weighted least squares, g >= 0.
     a = np.column_stack([np.ones_like(levels), levels])
     w = np.sqrt(counts.astype(float))
-    coef, *_ = np.linalg.lstsq(a * w[:, None], sigma ** 2 * w, rcond=None)
+    coef, *_ = np.linalg.lstsq(a * w[:, None], sensor_var * w, rcond=None)
     r2, g = float(coef[0]), float(coef[1])
     if g < 0 or r2 < 0:
         g = max(g, 0.0)
-        r2 = float(np.average(sigma ** 2 - g * levels, weights=counts))
+        r2 = float(np.average(sensor_var - g * levels, weights=counts))
         r2 = max(r2, 0.0)
     unclipped = (mean >= lo) & (mean <= hi)
     model_var = r2 + g * mean[unclipped]
+    if quantised:
+        model_var = model_var + code_step_dn(mean[unclipped], table) ** 2 / 12.0
     # A variance beyond the chi-square 99.9% point of the model means the pixel moved.
     from scipy.special import chdtri
 
@@ -332,12 +367,14 @@ def calibrate_noise(frames: Iterable[np.ndarray], *, table: np.ndarray | None = 
                         "record 20 or more")
     if levels.size < 3:
         warnings.append("the still scene covers a narrow range of brightness; the noise model is extrapolated")
-    noise_rms = float(np.sqrt(np.sum(sigma ** 2 * counts) / np.sum(counts)))
-    thr_sigma = float(sigma.max())
+    noise_rms = float(np.sqrt(np.sum(sensor_var * counts) / np.sum(counts)))
+    # The detector sees the quantised frames: the threshold is set for the measured noise.
+    thr_sigma = float(measured.max())
     c = detection_threshold(thr_sigma, false_rate=false_rate)
     return NoiseResult(
         levels_dn=levels,
-        sigma_dn=sigma,
+        sigma_dn=np.sqrt(sensor_var),
+        measured_sigma_dn=measured,
         counts=counts,
         noise_sigma_dn=noise_rms,
         read_sigma_dn=math.sqrt(r2),

@@ -613,9 +613,10 @@ def run_interactive(args, out: Path | None) -> int:
                 print(f"{name}: skipped, keeping the values of {session.base.name}")
                 return
             if result is None:
-                print(f"{name}: skipped, keeping the values of {session.base.name}")
-                session.results.pop(name, None)
-                _save_state(state_path, session)
+                if name in session.results:
+                    print(f"{name}: keeping the earlier result")
+                else:
+                    print(f"{name}: skipped, keeping the values of {session.base.name}")
                 return
             summary = result["summary"]
             if name in shown:

@@ -408,34 +408,49 @@ class ModbusOutput:
 
 
 # ---------------------------------------------------------------------- in its own process
-def _serve_in_child(kwargs: dict, commands, events) -> None:
-    """Body of the Modbus server process (see :class:`ModbusProcess`)."""
-    import os
-    import queue as _queue
+def _child_main() -> int:
+    """``python -m firmware_interface.modbus``: the server process of :class:`ModbusProcess`.
 
-    parent = os.getppid()
-    nice = kwargs.pop("nice", 0)
+    Reads JSON lines on stdin (first the :class:`ModbusOutput` arguments, then
+    ``["publish", record]``, ``["status", word]``, ``["window", s]``), writes
+    JSON event lines on its own stdout (``["started", port]``, ``["error", text]``,
+    ``["reset"]``, ``["setting", name, value]``) and exits at end of input, which
+    is also what happens when the instrument dies.
+    """
+    import json
+    import os
+    import sys
+
+    events = os.fdopen(os.dup(1), "w", buffering=1)
+    os.dup2(2, 1)  # anything else printed goes to stderr, not into the event stream
+    lock = threading.Lock()
+
+    def emit(*event) -> None:
+        with lock:
+            events.write(json.dumps(event) + "\n")
+
+    kwargs = json.loads(sys.stdin.readline() or "{}")
+    nice = int(kwargs.pop("nice", 0))
     if nice:
         try:
             os.nice(nice)  # measurement first: the server yields the CPU to the gauge
         except OSError:
             pass
-    out = ModbusOutput(**kwargs,
-                       on_reset=lambda: events.put(("reset",)),
-                       on_setting=lambda name, value: events.put(("setting", name, value)))
+    if kwargs.get("tcp") is not None:
+        kwargs["tcp"] = tuple(kwargs["tcp"])
+    out = ModbusOutput(**kwargs, on_reset=lambda: emit("reset"),
+                       on_setting=lambda name, value: emit("setting", name, value))
     try:
         out.start()
     except Exception as exc:  # noqa: BLE001 - reported to the parent
-        events.put(("error", str(exc)))
-        return
-    events.put(("started", out.tcp_port))
+        emit("error", str(exc))
+        return 1
+    emit("started", out.tcp_port)
     try:
-        while True:
+        for line in sys.stdin:
             try:
-                cmd = commands.get(timeout=1.0)
-            except _queue.Empty:
-                if os.getppid() != parent:  # the instrument died: free the port
-                    return
+                cmd = json.loads(line)
+            except ValueError:
                 continue
             kind = cmd[0]
             if kind == "publish":
@@ -445,9 +460,10 @@ def _serve_in_child(kwargs: dict, commands, events) -> None:
             elif kind == "window":
                 out.set_window(cmd[1])
             elif kind == "stop":
-                return
+                break
     finally:
         out.stop()
+    return 0
 
 
 class ModbusProcess:
@@ -455,107 +471,136 @@ class ModbusProcess:
 
     Serving many clients costs CPU time in the Python interpreter that holds
     it; in a separate process a flood of requests cannot take the interpreter
-    lock from the measuring loop.  Records go to the child through a queue
-    (``publish`` never blocks); resets and setting changes come back through
-    another one and call ``on_reset`` / ``on_setting`` on a thread of this
-    process.  The child runs at a lower priority (``nice``, default +10) so that
-    when the CPU is short the gauge keeps it and Modbus answers a little later.
-    The child exits when this process dies.
+    lock from the measuring loop.  The child is ``python -m
+    firmware_interface.modbus``; records go to it as JSON lines through a
+    queue and a writer thread (``publish`` never blocks: when the child falls
+    behind, records are dropped and :attr:`fault` is raised), resets and
+    setting changes come back and call ``on_reset`` / ``on_setting`` on a
+    thread of this process.  The child runs at a lower priority (``nice``,
+    default +10) so that when the CPU is short the gauge keeps it and Modbus
+    answers a little later; it exits when its input closes, also when this
+    process dies.
     """
 
     def __init__(self, *, on_reset: Callable[[], None] | None = None,
                  on_setting: Callable[[str, int], None] | None = None, nice: int = 10, **kwargs):
-        from raingauge.errors import ConfigError
-
         ModbusOutput(**kwargs)  # validate the arguments here, with the same errors
-        kwargs["nice"] = int(nice)
-        if "rtu" in kwargs and kwargs["rtu"] is None:
-            kwargs.pop("rtu")
-        self.kwargs = kwargs
+        self.kwargs = dict(kwargs, nice=int(nice))
         self.on_reset = on_reset
         self.on_setting = on_setting
         self.tcp = kwargs.get("tcp")
         self.tcp_port: int | None = None
         self.fault = False
+        self.dropped = 0
         self._proc = None
-        self._commands = None
-        self._events = None
-        self._reader: threading.Thread | None = None
-        self._ConfigError = ConfigError
+        self._queue = None
+        self._threads: list[threading.Thread] = []
 
     def start(self, timeout_s: float = 30.0) -> "ModbusProcess":
-        import multiprocessing as mp
+        import json
         import queue as _queue
+        import subprocess
+        import sys
 
-        ctx = mp.get_context("spawn")
-        self._commands = ctx.Queue(maxsize=1000)
-        self._events = ctx.Queue()
-        self._proc = ctx.Process(target=_serve_in_child, args=(self.kwargs, self._commands, self._events),
-                                 name="raingauge-modbus", daemon=True)
-        self._proc.start()
-        try:
-            first = self._events.get(timeout=timeout_s)
-        except _queue.Empty:
-            self._proc.terminate()
-            raise self._ConfigError("Modbus server process did not start in time") from None
-        if first[0] == "error":
-            self._proc.join(5)
-            raise self._ConfigError(first[1])
-        self.tcp_port = first[1]
-        self._reader = threading.Thread(target=self._read_events, name="modbus-events", daemon=True)
-        self._reader.start()
+        from raingauge.errors import ConfigError
+
+        self._proc = subprocess.Popen([sys.executable, "-m", "firmware_interface.modbus"],
+                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, bufsize=1)
+        self._proc.stdin.write(json.dumps(self.kwargs) + "\n")
+        self._proc.stdin.flush()
+        first: list = []
+        ready = threading.Event()
+
+        def read_first():
+            line = self._proc.stdout.readline()
+            first.append(json.loads(line) if line else ["error", "the server process ended at start"])
+            ready.set()
+
+        threading.Thread(target=read_first, daemon=True).start()
+        if not ready.wait(timeout_s):
+            self._kill()
+            raise ConfigError("Modbus server process did not start in time")
+        if first[0][0] != "started":
+            self._kill()
+            raise ConfigError(first[0][1])
+        self.tcp_port = first[0][1]
+        self._queue = _queue.Queue(maxsize=1000)
+        for target, name in ((self._write_commands, "modbus-commands"), (self._read_events, "modbus-events")):
+            t = threading.Thread(target=target, name=name, daemon=True)
+            t.start()
+            self._threads.append(t)
         return self
 
-    def _read_events(self) -> None:
+    def _kill(self) -> None:
+        if self._proc is not None and self._proc.poll() is None:
+            self._proc.kill()
+        if self._proc is not None:
+            self._proc.wait(5)
+
+    def _write_commands(self) -> None:
+        import json
+
         while True:
+            cmd = self._queue.get()
             try:
-                ev = self._events.get()
-            except (EOFError, OSError, ValueError):
+                self._proc.stdin.write(json.dumps(cmd) + "\n")
+                self._proc.stdin.flush()
+            except (OSError, ValueError):
+                if not self.fault:
+                    log.error("Modbus server process is gone (exit code %s)", self._proc.poll())
+                self.fault = True
                 return
-            if ev is None:
+            if cmd[0] == "stop":
                 return
+
+    def _read_events(self) -> None:
+        import json
+
+        for line in self._proc.stdout:
             try:
+                ev = json.loads(line)
                 if ev[0] == "reset" and self.on_reset is not None:
                     self.on_reset()
                 elif ev[0] == "setting" and self.on_setting is not None:
                     self.on_setting(ev[1], ev[2])
             except Exception:  # noqa: BLE001
-                log.exception("Modbus event %r", ev)
+                log.exception("Modbus event %r", line)
 
     def _send(self, cmd) -> None:
         import queue as _queue
 
-        if self._commands is None:
+        if self._queue is None:
             return
         try:
-            self._commands.put_nowait(cmd)
+            self._queue.put_nowait(cmd)
         except _queue.Full:
-            self.fault = True
-        if self._proc is not None and not self._proc.is_alive():
-            if not self.fault:
-                log.error("Modbus server process ended (exit code %s)", self._proc.exitcode)
+            self.dropped += 1
             self.fault = True
 
     def publish(self, record: dict[str, Any]) -> None:
-        self._send(("publish", dict(record)))
+        self._send(["publish", _jsonable(record)])
 
     def set_status(self, status: int) -> None:
-        self._send(("status", int(status)))
+        self._send(["status", int(status)])
 
     def set_window(self, window_s: float) -> None:
-        self._send(("window", float(window_s)))
+        self._send(["window", float(window_s)])
 
     def stop(self) -> None:
         if self._proc is None:
             return
-        self._send(("stop",))
-        self._proc.join(5)
-        if self._proc.is_alive():
-            self._proc.terminate()
-            self._proc.join(2)
-        self._events.put(None)
-        if self._reader is not None:
-            self._reader.join(2)
+        self._send(["stop"])
+        try:
+            self._proc.wait(5)
+        except Exception:  # noqa: BLE001 - subprocess.TimeoutExpired
+            self._kill()
+        for t in self._threads:
+            t.join(2)
+        for f in (self._proc.stdin, self._proc.stdout):
+            try:
+                f.close()
+            except (OSError, ValueError):
+                pass
         self._proc = None
 
     def __enter__(self) -> "ModbusProcess":
@@ -563,3 +608,19 @@ class ModbusProcess:
 
     def __exit__(self, *exc) -> None:
         self.stop()
+
+
+def _jsonable(record: dict[str, Any]) -> dict[str, Any]:
+    """Plain JSON types (numpy scalars and arrays to floats and lists)."""
+    out: dict[str, Any] = {}
+    for k, v in record.items():
+        if hasattr(v, "tolist"):
+            v = v.tolist()
+        elif isinstance(v, (list, tuple)):
+            v = [x.item() if hasattr(x, "item") else x for x in v]
+        out[k] = v
+    return out
+
+
+if __name__ == "__main__":  # pragma: no cover - the child of ModbusProcess
+    raise SystemExit(_child_main())

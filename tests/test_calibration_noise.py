@@ -30,7 +30,7 @@ def test_signal_dependent_noise_model():
     assert res.read_sigma_dn == pytest.approx(1.0, rel=0.25)
     # Sigma rises with intensity, and the threshold is set for the noisiest level.
     assert res.sigma_dn[-1] > 1.5 * res.sigma_dn[0]
-    assert res.threshold_sigma_dn == pytest.approx(res.sigma_dn.max())
+    assert res.threshold_sigma_dn == pytest.approx(res.measured_sigma_dn.max())
     assert res.sigma_at(200.0) == pytest.approx(np.sqrt(1.0 + 0.05 * 200), rel=0.1)
 
 
@@ -90,3 +90,13 @@ def test_frames_streamed_one_at_a_time_give_the_same_result():
     b = calibrate_noise(iter(list(frames)))
     assert a.noise_sigma_dn == pytest.approx(b.noise_sigma_dn, rel=1e-12)
     assert a.c_dn == pytest.approx(b.c_dn, rel=1e-12)
+
+
+def test_quantisation_is_removed_from_the_sensor_noise_but_kept_for_the_threshold():
+    """Sheppard's correction: 8-bit codes add 1/12 gray level^2 of variance on a linear camera."""
+    frames, truth = render_still_frames(read_sigma_dn=0.6, n_frames=16, seed=7)
+    res = calibrate_noise(frames)
+    assert res.noise_sigma_dn == pytest.approx(0.6, rel=0.05)
+    recorded = np.sqrt(np.mean(res.measured_sigma_dn ** 2))
+    assert recorded == pytest.approx(np.sqrt(0.36 + 1 / 12), rel=0.05)
+    assert res.c_dn == pytest.approx(detection_threshold(res.measured_sigma_dn.max()))

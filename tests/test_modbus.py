@@ -310,7 +310,7 @@ CHILD = r"""
 import sys, time
 from firmware_interface.modbus import ModbusProcess
 out = ModbusProcess(tcp=("127.0.0.1", 0)).start()
-print(out.tcp_port, out._proc.pid, flush=True)
+print(out.tcp_port, out._proc.pid, flush=True)  # no __main__ guard needed
 time.sleep(60)
 """
 

@@ -203,6 +203,10 @@ def test_drops_persist_and_move_exactly_with_their_velocity():
     # the fall speed is the velocity law's, the wind the one asked for
     v = drops.fall_velocity(t["diameter_m"], "gunn_kinzer")
     assert np.allclose(t["velocity_m_s"][:, 1], v)
+    # every drawn drop keeps within the bound of Eq. (29), tau < 4 a / v
+    from raingauge.physics.streaks import tau_bound_s
+
+    assert np.all(t["tau_s"] < tau_bound_s(t["radius_m"], np.linalg.norm(t["velocity_m_s"], axis=1)))
     assert np.allclose(t["velocity_m_s"][:, 0], 3.0 * math.cos(math.radians(20.0)))
 
 

@@ -84,7 +84,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from raingauge.errors import ConfigError, InputError, ProfileError, RaingaugeError
+from raingauge.errors import ConfigError, InputError, ProfileError
 from raingauge.physics import drops as _drops
 
 __all__ = [
@@ -249,14 +249,35 @@ def _capsule_spans(y, x0, y0, x1, y1, r):
 _SCRATCH: dict = {}
 
 
+def _span_entries(rows, xl, xr, weight, n, width):
+    """Flat indices and values of the second-difference form of row spans [xl, xr].
+
+    Summing the values along a row gives, at each pixel, ``weight`` times the
+    part of the pixel's width inside [xl, xr] (pixel centres at integers).
+    """
+    a = np.asarray(xl, np.float64) + 0.5
+    b = np.asarray(xr, np.float64) + 0.5
+    ia = np.floor(a)
+    ib = np.floor(b)
+    fa = a - ia
+    fb = b - ib
+    ia = np.clip(ia, -1, n).astype(np.int64)
+    ib = np.clip(ib, -1, n).astype(np.int64)
+    base = np.asarray(rows, np.int64) * width
+    w = np.asarray(weight, np.float64)
+    flat = np.concatenate([base + np.maximum(ia, 0), base + ia + 1, base + np.maximum(ib, 0), base + ib + 1])
+    vals = np.concatenate([w * (1.0 - fa), w * fa, -w * (1.0 - fb), -w * fb])
+    return flat, vals
+
+
 def _scratch(m: int, width: int):
     """Reusable accumulation buffers for one image size (not thread-safe)."""
     key = (m, width)
     if key not in _SCRATCH:
         if len(_SCRATCH) > 8:
             _SCRATCH.clear()
-        _SCRATCH[key] = (np.zeros(m * width, np.float32), np.zeros((m, width), np.float32),
-                         np.zeros((m + 1, width + 1), np.float32))
+        _SCRATCH[key] = (np.zeros(m * width, np.float64), np.zeros((m, width), np.float64),
+                         np.zeros((m + 1, width + 1), np.float64))
     return _SCRATCH[key]
 
 
@@ -291,7 +312,7 @@ def render_streaks(shape, p0, p1, radius_px, area_px, *, n_sub: int = 2,
 
     Returns
     -------
-    beta : ndarray, shape (M, N), float32
+    beta : ndarray, shape (M, N), float32 (float64 view with ``_view``)
         Sum over streaks of the exposure fraction tau / T at each pixel.
     beta_inside : ndarray, shape (n,)
         Exposure fraction of a pixel fully inside each streak (its beta, Eq. 18).
@@ -318,53 +339,46 @@ def render_streaks(shape, p0, p1, radius_px, area_px, *, n_sub: int = 2,
     huge = (j_hi - j_lo + 1) > max_rows_factor * m * ns
     j_lo = np.where(huge, np.maximum(j_lo, 0), j_lo)
     j_hi = np.where(huge, np.minimum(j_hi, m * ns - 1), j_hi)
-    counts = np.maximum(j_hi - j_lo + 1, 0)
+    # a vertical streak is a rectangle [x0 - r, x0 + r] on the rows its segment spans
+    # entirely; those rows are added as one rectangle, the others row by row
+    vertical = (np.abs(x1 - x0) < 1e-9) & ~huge
+    r_a = np.ceil(np.minimum(y0, y1) + 0.5).astype(np.int64)
+    r_b = np.floor(np.maximum(y0, y1) - 0.5).astype(np.int64)
+    rect = vertical & (r_b >= r_a)
+    j_a = np.where(rect, r_a * ns, 0)
+    n_rect_j = np.where(rect, (r_b - r_a + 1) * ns, 0)
+    counts = np.maximum(j_hi - j_lo + 1, 0) - n_rect_j
     total = int(counts.sum())
-    if total == 0:
-        return np.zeros((m, n), np.float32), beta_inside
     idx = np.repeat(np.arange(count), counts)
     starts = np.cumsum(counts) - counts
     nsp = ns[idx]
-    j = np.arange(total) - np.repeat(starts - j_lo, counts)
+    k = np.arange(total) - np.repeat(starts, counts)
+    j = j_lo[idx] + k
+    j = j + np.where(j >= j_a[idx], n_rect_j[idx], 0)
     ys = ((j + 0.5) / nsp - 0.5).astype(np.float32)
     f32 = np.float32
     xl, xr = _capsule_spans(ys, x0.astype(f32)[idx], y0.astype(f32)[idx], x1.astype(f32)[idx],
                             y1.astype(f32)[idx], r.astype(f32)[idx])
     seg = np.maximum(xr - xl, f32(0.0)) / nsp
     cover = np.bincount(idx, weights=seg, minlength=count)
+    cover = cover + np.where(rect, (r_b - r_a + 1) * 2.0 * r, 0.0)
     length = np.hypot(x1 - x0, y1 - y0)
     analytic = 2.0 * r * length + math.pi * r * r
     cover = np.where(huge | (cover <= 0), analytic, cover)
     beta_inside = area / cover
-    # keep spans on image rows that reach into the image
+    width = n + 2
+    # spans on image rows that reach into the image
     row = np.floor(ys + f32(0.5)).astype(np.int64)
     keep = (seg > 0) & (row >= 0) & (row < m) & (xr > -0.5) & (xl < n - 0.5)
-    if not np.any(keep):
-        return np.zeros((m, n), np.float32), beta_inside
-    wgt = (beta_inside[idx[keep]] / nsp[keep]).astype(np.float32)
-    width = n + 2
-    base = row[keep] * width
-    a = xl[keep] + f32(0.5)
-    b = xr[keep] + f32(0.5)
-    ia = np.floor(a)
-    ib = np.floor(b)
-    fa = a - ia
-    fb = b - ib
-    # second-difference form of the pixel coverage of [xl, xr] on each row: four
-    # entries per span; summing along the row gives the coverage (each row's entries sum to 0)
-    nk = wgt.size
-    flat = np.empty(4 * nk, np.int64)
-    vals = np.empty(4 * nk, np.float32)
-    ia = np.clip(ia, -1, n).astype(np.int64)
-    ib = np.clip(ib, -1, n).astype(np.int64)
-    flat[:nk] = base + np.maximum(ia, 0)
-    flat[nk:2 * nk] = base + ia + 1
-    flat[2 * nk:3 * nk] = base + np.maximum(ib, 0)
-    flat[3 * nk:] = base + ib + 1
-    vals[:nk] = wgt * (1.0 - fa)
-    vals[nk:2 * nk] = wgt * fa
-    vals[2 * nk:3 * nk] = -wgt * (1.0 - fb)
-    vals[3 * nk:] = -wgt * fb
+    flat, vals = _span_entries(row[keep], xl[keep], xr[keep], beta_inside[idx[keep]] / nsp[keep], n, width)
+    # rectangles: their entries go to the first row (+) and the row after the last (-)
+    ri = np.nonzero(rect & (r_b >= 0) & (r_a < m) & (x0 + r > -0.5) & (x0 - r < n - 0.5))[0]
+    ra = np.maximum(r_a[ri], 0)
+    rb = np.minimum(r_b[ri], m - 1)
+    f_top, v_top = _span_entries(ra, x0[ri] - r[ri], x0[ri] + r[ri], beta_inside[ri], n, width)
+    below = rb + 1 < m
+    f_bot, v_bot = _span_entries(rb[below] + 1, x0[ri][below] - r[ri][below], x0[ri][below] + r[ri][below],
+                                 -beta_inside[ri][below], n, width)
     acc, diff, integral = _scratch(m, width)
     acc.fill(0.0)
     np.add.at(acc, flat, vals)
@@ -373,10 +387,13 @@ def render_streaks(shape, p0, p1, radius_px, area_px, *, n_sub: int = 2,
     # A[y] - A[y-1] over y' <= y, x' <= x is the sum of A[y, x'] over x' <= x
     diff[0] = acc2[0]
     np.subtract(acc2[1:], acc2[:-1], out=diff[1:])
-    cv2.integral(diff, integral, sdepth=cv2.CV_32F)
+    if ri.size:
+        dflat = diff.reshape(-1)
+        np.add.at(dflat, np.concatenate([f_top, f_bot]), np.concatenate([v_top, v_bot]))
+    cv2.integral(diff, integral, sdepth=cv2.CV_64F)
     out = integral[1:, 1:n + 1]
     if not _view:
-        out = out.copy()
+        out = out.astype(np.float32)
     return out, beta_inside
 
 
@@ -404,7 +421,7 @@ def compose_rain(background, beta, *, drop_brightness_dn: float = DEFAULT_DROP_B
     out = np.subtract(np.float32(drop_brightness_dn), bg, out=out, dtype=np.float32)
     if beta.size and float(beta.max()) > 1.0:
         beta = np.minimum(beta, 1.0)
-    out *= beta
+    np.multiply(out, beta, out=out, casting="same_kind")
     out += bg
     return out
 
@@ -599,7 +616,7 @@ class RainVolume:
         Piecewise-constant DSD in time (fine diameter bins ``edges``).
     edges : ndarray
         Diameter bin edges [m].
-    regions : list of _Region
+    regions : _Regions
         Generation region of each bin.
     velocity_model : str
         Fall-velocity law (:func:`raingauge.physics.drops.fall_velocity`).

@@ -204,11 +204,16 @@ class RainDynamics:
         Rain cells must lie within this angle of the frame's dominant rain
         direction [deg]; ``None`` turns the test off (rain whose direction
         varies across the frame).
+    min_frame_fraction : float
+        Rain is stationary in time (Sec. 4.1): a rain region must have seen
+        rain pixels in at least this fraction of the window's frames (and in
+        two at least).  An object edge seen in one or two frames is not rain.
     """
 
     def __init__(self, shape: tuple[int, int], *, l: int = 11, f: int = 30, cell: int = 3, smooth: int = 7,
-                 max_pixels: int = 3000, min_ratio: float = 2.5, min_strength: float = 0.05,
-                 min_events: float = 20.0, max_angle_dev_deg: float | None = 30.0):
+                 max_pixels: int = 3000, min_ratio: float = 2.5, min_strength: float = 0.08,
+                 min_events: float = 20.0, max_angle_dev_deg: float | None = 30.0,
+                 min_frame_fraction: float = 1.0 / 6.0):
         if f < 1:
             raise ValueError(f"window f must be at least one frame, got {f!r}")
         if cell < 1 or smooth < 1:
@@ -224,6 +229,12 @@ class RainDynamics:
         self.max_pixels = max_pixels
         self.min_ratio, self.min_strength, self.min_events = float(min_ratio), float(min_strength), float(min_events)
         self.max_angle_dev_deg = max_angle_dev_deg
+        self.min_frame_fraction = float(min_frame_fraction)
+        # Coarse blocks (smooth x smooth cells) counting the frames that saw rain.
+        self.block = self.cell * self.smooth
+        self.bh = -(-self.shape[0] // self.block)
+        self.bw = -(-self.shape[1] // self.block)
+        self._frames_seen = np.zeros(self.bh * self.bw, np.int32)
         self.gh = -(-self.shape[0] // self.cell)
         self.gw = -(-self.shape[1] // self.cell)
         self._acc = np.zeros((self.gh * self.gw, self.K), np.float64)
@@ -238,6 +249,7 @@ class RainDynamics:
     def reset(self) -> None:
         self._acc[:] = 0
         self._cnt[:] = 0
+        self._frames_seen[:] = 0
         self._ring.clear()
 
     def update(self, b: np.ndarray) -> None:
@@ -261,11 +273,14 @@ class RainDynamics:
             n = np.zeros(0)
         self._acc[ucid] += e
         self._cnt[ucid] += n
-        self._ring.append((ucid, e, n))
+        blocks = np.unique((rows // self.block) * self.bw + cols // self.block)
+        self._frames_seen[blocks] += 1
+        self._ring.append((ucid, e, n, blocks))
         while len(self._ring) > self.f:
-            ocid, oe, on = self._ring.popleft()
+            ocid, oe, on, ob = self._ring.popleft()
             self._acc[ocid] -= oe
             self._cnt[ocid] -= on
+            self._frames_seen[ob] -= 1
 
     def field(self) -> DynamicsField:
         """Direction, strength and segmentation from the current window."""
@@ -292,6 +307,10 @@ class RainDynamics:
             ratio = np.where(emax > 0, emax / np.maximum(emin, np.maximum(floor, 1e-12)), 0.0)
         direction = ORIENTATIONS_DEG[kmax]
         rain = (emax >= self.min_strength) & (ratio >= self.min_ratio) & (events >= self.min_events)
+        need = max(2, math.ceil(self.min_frame_fraction * len(self._ring)))
+        seen = cv2.dilate(self._frames_seen.reshape(self.bh, self.bw).astype(np.float32), np.ones((3, 3), np.uint8))
+        seen_cells = np.repeat(np.repeat(seen, self.smooth, axis=0), self.smooth, axis=1)[:self.gh, :self.gw]
+        rain &= seen_cells >= need
         if self.max_angle_dev_deg is not None and np.any(rain):
             # Within a frame rain falls in one direction (Sec. 4.1); cells that
             # disagree with the dominant direction are scene motion.

@@ -196,7 +196,7 @@ def warp_to(frame: np.ndarray, M: np.ndarray, *, min_shift_px: float = None,
         min_shift_px = WARP_MIN_SHIFT_PX
     if transform_magnitude_px(M, (h, w)) < min_shift_px:
         return frame, None
-    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+    flags = cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP
     src = frame if frame.dtype in (np.uint8, np.float32) else frame.astype(np.float32)
     affine = np.allclose(M[2], [0, 0, 1])
     if affine:
