@@ -49,8 +49,16 @@ def _load(name: str):
         raise
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with the command line's error format, ``raingauge: error: ...`` (exit status 2)."""
+
+    def error(self, message: str):
+        self.print_usage(sys.stderr)
+        self.exit(2, f"raingauge: error: {message}. Fix: see '{self.prog} --help'\n")
+
+
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="raingauge",
         description="A camera rain gauge: measure, remove and simulate rain in video.",
     )

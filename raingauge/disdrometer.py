@@ -234,6 +234,9 @@ def read_parsivel(path, *, interval_s: float = PARSIVEL_INTERVAL_S) -> ParsivelF
         If the file does not exist or cannot be decompressed.
     """
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"Parsivel file {path} is a folder; give the path of a telegram file "
+                         f"(.dat or .dat.gz) inside it")
     if not path.is_file():
         raise InputError(f"Parsivel file {path} not found; give the path of a telegram file "
                          f"(.dat or .dat.gz)")

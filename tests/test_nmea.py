@@ -114,15 +114,40 @@ def test_pynmea2_reads_the_serial_port_through_a_pty():
     assert writer.sent == 2 and not writer.fault
 
 
-def test_stuck_port_never_blocks_publish_and_recovers():
-    """A port that does not exist: publish returns at once, fault raised, oldest dropped."""
-    writer = SerialWriter("/nonexistent/ttyRG0", 9600, queue_size=5, backoff_s=(0.05, 0.1))
+def test_missing_port_never_blocks_publish_and_recovers_when_plugged_in(tmp_path):
+    """The adapter is unplugged: publish returns at once, the fault is raised and the oldest
+    records are dropped; plugged in again (here: the device name appears), sending resumes."""
+    port = tmp_path / "ttyRG0"
+    writer = SerialWriter(str(port), 9600, queue_size=3, backoff_s=(0.05, 0.1))
+    master = slave = None
     try:
         t0 = time.monotonic()
         for i in range(50):
             writer.publish(_record(drops_counted=i))
         assert time.monotonic() - t0 < 1.0
         time.sleep(0.3)
-        assert writer.fault and writer.errors >= 1 and writer.dropped >= 40
+        assert writer.fault and writer.errors >= 1 and writer.dropped >= 46
+        master, slave = os.openpty()
+        os.set_blocking(master, False)
+        os.symlink(os.ttyname(slave), port)
+        expected = 50 - writer.dropped          # what was kept: the in-flight record and the queue
+        lines = _read_lines(master, 2 * expected)
+        sent = [int(nmea.parse(line)[4]) for line in lines if line.startswith("$PRGRR")]
+        assert len(sent) == expected and sent == sorted(sent) and sent[-1] == 49
+        assert _wait(lambda: not writer.fault)
+        writer.publish(_record(drops_counted=99))
+        assert nmea.parse(_read_lines(master, 2)[0])[4] == "99"
     finally:
-        writer.close(timeout_s=0.2)
+        writer.close(timeout_s=0.5)
+        for fd in (master, slave):
+            if fd is not None:
+                os.close(fd)
+
+
+def _wait(pred, timeout=3.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if pred():
+            return True
+        time.sleep(0.02)
+    return False

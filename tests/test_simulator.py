@@ -179,6 +179,35 @@ def test_drop_counts_in_a_volume_are_poisson_with_the_dsd_density(wind, directio
         assert abs(c[:half].mean() - c[half:].mean()) < 5 * math.sqrt(2 * expected[lim] / half)
 
 
+def test_drops_left_out_could_not_change_a_pixel_by_the_threshold():
+    """The rain-visible region (Sec. 6.1) is honest: a drop just outside the depth range
+    generated for its size changes no pixel by render_threshold_dn (drawn with the renderer)."""
+    prof = small_profile(320, 240)
+    sim = simulate(prof, n_frames=1, rain_rate_mm_h=10.0, seed=0, background="uniform:60")
+    rendering = sim.truth["rendering"]
+    threshold, contrast = rendering["render_threshold_dn"], rendering["contrast_dn"]
+    assert threshold == 0.25 and contrast == pytest.approx(DEFAULT_DROP_BRIGHTNESS_DN - 60.0)
+    edges = np.asarray(rendering["bin_edges_mm"]) * 1e-3
+    checked = 0
+    for k in range(0, edges.size - 1, 5):
+        lo_hi = rendering["visible_depth_m"][k]
+        d = edges[k + 1]
+        for z, inside in ((None if lo_hi[0] is None else lo_hi[1] * 1.03, False),
+                          (None if lo_hi[0] is None or lo_hi[0] <= 0.05 else lo_hi[0] / 1.03, False)):
+            if z is None:
+                continue
+            caps, _ = _one_drop(prof, z_m=z, diameter_m=d, y_m=-0.01 * z)
+            beta, _ = render_streaks(prof.shape, caps["p0"], caps["p1"], caps["radius_px"], caps["area_px"])
+            assert beta.max() * contrast < threshold
+            checked += 1
+        if lo_hi[0] is not None:          # and inside the range the largest drops of the bin do reach it
+            z_mid = math.sqrt(lo_hi[0] * lo_hi[1])
+            caps, _ = _one_drop(prof, z_m=z_mid, diameter_m=d, y_m=-0.01 * z_mid)
+            _, beta_in = render_streaks(prof.shape, caps["p0"], caps["p1"], caps["radius_px"], caps["area_px"])
+            assert beta_in[0] * contrast > 0.9 * threshold
+    assert checked >= 8
+
+
 def test_drops_persist_and_move_exactly_with_their_velocity():
     """A drop keeps its id across frames and advances by v / frame rate; its streak is its projection."""
     prof = small_profile(160, 120, base="canon_xl1")
@@ -281,13 +310,15 @@ def test_truth_rate_is_eq28_on_the_generated_drops():
     volume = truth["reference_volume"]["volume_m3"]
     fps, exposure = prof.frame_rate_hz, prof.exposure_s
     times = np.arange(sim.n_frames) / fps + exposure / 2
-    rates, counts = [], []
+    rates, counts, z6, d34 = [], [], [], []
     for pop in sim.population(times):
         inside = np.all((pop["position_m"] >= box[:, 0]) & (pop["position_m"] < box[:, 1]), axis=1)
         d = pop["diameter_m"][inside]
         rates.append(drops.rain_rate_from_drops(d, pop["velocity_m_s"][inside, 1], volume))
         counts.append(np.histogram(d * 1e3, bins=drops.PARSIVEL_D_EDGES_MM)[0])
-    rates, counts = np.array(rates), np.array(counts)
+        z6.append(np.sum((d * 1e3) ** 6) / volume)
+        d34.append([np.sum((d * 1e3) ** 3), np.sum((d * 1e3) ** 4)])
+    rates, counts, z6, d34 = np.array(rates), np.array(counts), np.array(z6), np.array(d34)
     assert truth["rain_rate_mm_h"] == pytest.approx(rates.mean(), rel=1e-9)
     assert len(truth["windows"]) == 2
     half = sim.n_frames // 2
@@ -296,6 +327,8 @@ def test_truth_rate_is_eq28_on_the_generated_drops():
         n = np.asarray(w["dsd_n_m3_mm"]) * drops.PARSIVEL_D_WIDTHS_MM * volume
         assert np.allclose(n, counts[sl].mean(axis=0))
         assert set(w) >= {"t_start_s", "t_end_s", "rain_rate_mm_h", "dsd_d_mm", "dsd_n_m3_mm"}
+        assert w["z_dbz"] == pytest.approx(10 * math.log10(z6[sl].mean()), abs=1e-9)
+        assert w["dm_mm"] == pytest.approx(d34[sl, 1].sum() / d34[sl, 0].sum(), rel=1e-9)
     # the nominal rate is reported beside it, not forced onto it
     assert truth["nominal_rain_rate_mm_h"] == 8.0
     assert truth["ratio_to_nominal"] == pytest.approx(truth["rain_rate_mm_h"] / 8.0)

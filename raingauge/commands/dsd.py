@@ -51,9 +51,14 @@ def run(args: argparse.Namespace) -> int:
     from raingauge.disdrometer import daily_totals_mm, read_parsivel, record_moments
     from raingauge.errors import InputError
 
-    if not args.interval > 0:
-        raise InputError(f"--interval must be > 0 seconds, got {args.interval}")
+    if not (math.isfinite(args.interval) and args.interval > 0):
+        raise InputError(f"--interval must be a number of seconds > 0, got {args.interval}. "
+                         "Fix: give the telegram interval, e.g. --interval 30")
     pf = read_parsivel(args.file, interval_s=args.interval)
+    if not pf.records:
+        why = "".join(f"; line {n}: {reason}" for n, reason in pf.malformed_examples[:2])
+        raise InputError(f"{pf.path} holds no Parsivel telegram ({pf.malformed_lines} malformed lines{why}). "
+                         "Fix: give a Parsivel telegram file (.dat or .dat.gz, one 24-field line per record)")
 
     out = None
     close = False

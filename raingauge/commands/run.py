@@ -187,6 +187,11 @@ def run(args: argparse.Namespace) -> int:
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     inst = build_instrument(config, print_records=config.log["print_records"] and not args.quiet)
 
+    p = inst.profile
+    print(f"raingauge: measuring from {inst.grabber.source.name}, camera {p.name} {p.width_px}x{p.height_px} "
+          f"at {p.frame_rate_hz:g} Hz; a record every {inst.step_s:g} s over {inst.window_s:g} s",
+          file=sys.stderr, flush=True)
+
     def on_signal(signum, frame):
         inst.stop()
 

@@ -11,7 +11,7 @@ gray level), with --clean the rain-free video.
 Examples:
   raingauge simulate rain.mkv --camera gauge-default --seconds 10 --rate 10
   raingauge simulate rain.mkv --seconds 20 --rate 25 --dsd gamma --mu 3 --wind 4 --wind-dir 0
-  raingauge simulate frames/ --seconds 60 --parsivel locarno.dat.gz --start 2018-10-29T06:00:00
+  raingauge simulate frames/ --seconds 60 --parsivel locarno.dat.gz --start 2018-10-28T10:00:00
   raingauge simulate busy.mkv --seconds 5 --rate 10 --background astronaut --motion pan:40 --motion ripples
 """
 
@@ -24,6 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("out", help="output video (.mkv, FFV1) or folder for PNG frames")
     parser.add_argument("--camera", default=None, help="camera profile TOML or shipped name (default gauge-default)")
     parser.add_argument("--seconds", type=float, required=True, help="clip length [s]")
+    parser.add_argument("--size", default=None, metavar="WxH",
+                        help="render at this frame size, the field of view kept (focal length and pixel "
+                             "pitch scaled with the width), e.g. 320x240")
     rain = parser.add_argument_group("rain (--rate or --parsivel)")
     rain.add_argument("--rate", type=float, default=None, help="nominal rain rate [mm/h]")
     rain.add_argument("--dsd", default="marshall_palmer",
@@ -82,8 +85,17 @@ def run(args: argparse.Namespace) -> int:
         if args.dsd not in ("gamma", "normalized_gamma"):
             raise ConfigError("--mu applies to --dsd gamma or normalized_gamma")
         dsd_params["mu"] = args.mu
+    camera = args.camera
+    if args.size is not None:
+        from raingauge.render.simulator import small_profile
+
+        try:
+            w, h = (int(v) for v in args.size.lower().split("x"))
+        except ValueError:
+            raise ConfigError(f"--size {args.size!r}: expected WIDTHxHEIGHT, e.g. 320x240") from None
+        camera = small_profile(w, h, base=camera or "gauge-default")
     sim = simulate(
-        args.camera, seconds=args.seconds, rain_rate_mm_h=args.rate,
+        camera, seconds=args.seconds, rain_rate_mm_h=args.rate,
         dsd=None if args.parsivel else args.dsd, dsd_params=dsd_params or None,
         parsivel=args.parsivel, start=args.start, velocity_model=args.velocity_model,
         wind_m_s=args.wind, wind_dir_deg=args.wind_dir, background=args.background, motion=args.motion,

@@ -31,6 +31,8 @@ FIG15_PANELS = {
 }
 _KEY = {"exposure": "exposure_s", "f-number": "f_number", "focus": "focus_distance_m"}
 _SHORT = {"focal_length_px": "f", "f_number": "N", "focus_distance_m": "z0 [m]", "exposure_s": "T [s]"}
+#: largest drop radius [mm]: the paper's a_max (Appendix 10.2) and the end of its velocity law
+MAX_RADIUS_MM = 3.5
 _LABEL = {"exposure": "exposure time T [ms]", "f-number": "F-number N", "focus": "focus distance z0 [m]"}
 
 
@@ -144,7 +146,13 @@ def run(args: argparse.Namespace) -> int:
     pitch = profile.pixel_pitch_m
     if args.fig15 is not None:
         out_dir = Path(args.fig15)
-        out_dir.mkdir(parents=True, exist_ok=True)
+        if out_dir.exists() and not out_dir.is_dir():
+            raise ConfigError(f"--fig15 {out_dir} is a file, not a folder. Fix: give a folder for the three PNGs")
+        try:
+            out_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ConfigError(f"--fig15 {out_dir}: cannot create the folder ({exc.strerror}). "
+                              "Fix: choose a writable folder") from None
         curves = fig15_curves(pitch)
         written = []
         for panel, (which, xs, ys) in curves.items():
@@ -176,6 +184,15 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--f-number {n} is outside the lens range {profile.f_number_range}. Fix: pick one inside")
     if z0 <= f * pitch:
         raise ConfigError(f"--focus-m {z0} m is inside the focal length {f * pitch:.3g} m. Fix: focus farther")
+    if args.radius_mm > MAX_RADIUS_MM:
+        raise ConfigError(f"--radius-mm {args.radius_mm} is larger than any raindrop (radius <= "
+                          f"{MAX_RADIUS_MM:g} mm; larger drops break up). Fix: give a radius of 0-{MAX_RADIUS_MM:g} mm")
+    if args.sweep is not None:
+        if args.png is None:
+            raise ConfigError("--sweep needs --png OUT (the file to draw the curve into)")
+        if not Path(args.png).parent.is_dir():
+            raise ConfigError(f"--png {args.png}: the folder {Path(args.png).parent} does not exist. "
+                              "Fix: create it or choose another path")
     dsd = None
     velocity_model = "paper"
     if args.rain_rate is not None:
@@ -200,8 +217,6 @@ def run(args: argparse.Namespace) -> int:
         "effective_frame_rate_hz": min(profile.frame_rate_hz, 1.0 / t),
     }
     if args.sweep is not None:
-        if args.png is None:
-            raise ConfigError("--sweep needs --png OUT (the file to draw the curve into)")
         lo_hi = {
             "exposure": exp_range if exp_range[0] > 0 else (profile.frame_interval_s / 10, exp_range[1]),
             "f-number": profile.f_number_range or (max(1.0, n / 4), n * 4),

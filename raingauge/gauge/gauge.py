@@ -25,7 +25,7 @@ products (:mod:`raingauge.gauge.products`).
 from __future__ import annotations
 
 import math
-from collections import deque
+from collections import Counter, deque
 
 import numpy as np
 
@@ -64,6 +64,7 @@ QUALITY_FLAGS: dict[str, str] = {
     "scene_motion": "strong scene or camera motion: many one-frame changes that are not rain",
     "lens_obscured": "sudden loss of sharpness: water or dirt on the lens",
     "dropped_frames": "gaps in the frame timestamps",
+    "low_contrast": "drops barely brighter than the background: small drops are missed, the rate reads low",
 }
 
 
@@ -96,6 +97,9 @@ class RainGauge:
         spread evenly over a wider streak; the velocity law rejects it) or
         ``"pillbox"`` (convolution with the blur circle: soft edges, also bounded
         by a blur test).  See :mod:`raingauge.gauge.volume`.
+    overlap_correction : bool
+        Count isolated drops up by the chance that a streak of their shape would have
+        touched another one in the same frame (merged streaks are not measured).
     volume : SampleVolume, optional
         A precomputed sample volume for this profile and these options.
     """
@@ -104,7 +108,7 @@ class RainGauge:
                  velocity_model: str = "paper", clock_start_s: float = 0.0,
                  detection_threshold_dn: float | None = None, smooth_px: int = 5, min_drops: int = 20,
                  keep_drops: bool = False, defocus_model: str = "uniform",
-                 volume: SampleVolume | None = None):
+                 overlap_correction: bool = True, volume: SampleVolume | None = None):
         from raingauge.physics.drops import FALL_VELOCITY_MODELS
 
         if velocity_model not in FALL_VELOCITY_MODELS:
@@ -127,6 +131,7 @@ class RainGauge:
         if defocus_model not in DEFOCUS_MODELS:
             raise ValueError(f"unknown defocus model {defocus_model!r}; valid: {list(DEFOCUS_MODELS)}")
         self.defocus_model = defocus_model
+        self.overlap_correction = bool(overlap_correction)
         self._shape = "uniform" if defocus_model == "uniform" else "chord"
         self.volume = volume if volume is not None else SampleVolume(
             profile, velocity_model=velocity_model, defocus_model=defocus_model)
@@ -144,6 +149,10 @@ class RainGauge:
         self._last_t = None
         self._sharpness: deque = deque(maxlen=int(max(10 * profile.frame_rate_hz, 10)))
         self._brightness: deque = deque(maxlen=400)     # E_r estimates of law-abiding streaks
+        #: why measured streaks were not counted (diagnostics)
+        self.rejections: Counter = Counter()
+        self._dilated = None
+        self._rng = np.random.default_rng(12345)
         self._empty_scale = self._typical_drop_rate()
 
     # ------------------------------------------------------------------ public
@@ -223,6 +232,11 @@ class RainGauge:
 
         flags = set()
         sub = raw[::4, ::4]
+        self._last_mean_bg = float(np.mean(cur[::4, ::4]))
+        if self._brightness and len(self._brightness) >= 10:
+            contrast = float(np.percentile(np.asarray(self._brightness), 90)) - self._last_mean_bg
+            if contrast < 30.0 * self.c:
+                flags.add("low_contrast")
         if float(np.mean(sub >= 250)) > 0.05:
             flags.add("overexposed")
         if float(np.mean(sub)) < 12.0:
@@ -306,6 +320,7 @@ class RainGauge:
             plat = sp.row_plateau
             if not (np.isfinite(w_app) and np.isfinite(mot) and mot > 0 and w_app > 0 and plat > 0):
                 rejected += 1
+                self.rejections["unmeasurable"] += 1
                 continue
             dx = sp.axis[2] * mot
             # whole streak, by the fitted geometry
@@ -313,19 +328,23 @@ class RainGauge:
             half_w = 0.5 * (w_app + abs(dx)) + EDGE_MARGIN_PX
             half_h = 0.5 * (w_app + mot) + EDGE_MARGIN_PX
             if xc - half_w < 0 or xc + half_w > N - 1 or yc - half_h < 0 or yc + half_h > M - 1:
+                self.rejections["clipped"] += 1
                 continue
             a_app = w_app * z0 / (2 * f)
             v_app = mot * z0 / (f * T)
             if not bool(passes_velocity_law(a_app, v_app, w_app, mot, model=self.velocity_model)):
                 rejected += 1
+                self.rejections["velocity_law"] += 1
                 continue
             bf = sp.beta_fit
             if bf is not None and not (-0.05 <= bf[0] <= bmax + 0.05):
                 rejected += 1
+                self.rejections["photometric_eq18"] += 1
                 continue
             if self.defocus_model == "pillbox":
                 if not bool(passes_blur(sp.blur_px, sp.width_px)):
                     rejected += 1
+                    self.rejections["blur"] += 1
                     continue
                 cands.append((sp, w_app, mot, dx, xc, yc, None))
                 continue
@@ -346,6 +365,7 @@ class RainGauge:
                 q = float(photometric_focus(total, w_app, e_r - ib)) if np.isfinite(e_r) else 1.0
                 if not q >= self.volume.q_min:
                     rejected += 1
+                    self.rejections["defocus_photometric"] += 1
                     continue
                 w_true = w_app * math.sqrt(min(q, 1.0))
                 a0 = w_true * z0 / (2 * f)
@@ -365,13 +385,19 @@ class RainGauge:
                     dup = True
                     break
             if dup:
+                self.rejections["seen_before"] += 1
                 continue
             kap = float(self.volume.kappa(a))
             area = float(effective_area_rate_px2_s((dx, mot), w_app, prof.shape, exposure_s=T,
                                                    frame_interval_s=self._frame_interval))
             if kap <= 0 or area <= 0:
                 rejected += 1
+                self.rejections["no_volume"] += 1
                 continue
+            # a drop whose streak touched another one is lost to the merge: count the
+            # isolated ones up by the chance of isolation at this streak's size and frame
+            if self.overlap_correction:
+                area *= 1.0 - self._overlap_probability(labels, sp)
             z = float(self.volume.depth_m(a))
             v = mot * z / (f * T)
             weight = 1.0 / (kap * area)
@@ -382,6 +408,32 @@ class RainGauge:
             self._recent.append(d)
             counted.append(d)
         return counted, rejected
+
+    def _overlap_probability(self, labels, sp) -> float:
+        """Chance that this streak's own pixels, placed at random in this frame, would touch
+        another detected streak (and be merged with it) [-]."""
+        import cv2
+
+        if self._dilated is None or self._dilated[0] is not labels:
+            mask = (labels > 0).astype(np.uint8)
+            self._dilated = (labels, cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool))
+        grown = self._dilated[1]
+        x0, y0, img, own, other = sp._crop
+        ys_o, xs_o = np.nonzero(own)
+        if ys_o.size == 0:
+            return 0.0
+        ys_o -= ys_o.min()
+        xs_o -= xs_o.min()
+        M, N = labels.shape
+        h, w = int(ys_o.max()) + 1, int(xs_o.max()) + 1
+        if h >= M or w >= N:
+            return 0.0
+        k = 24
+        oy = self._rng.integers(0, M - h + 1, k)
+        ox = self._rng.integers(0, N - w + 1, k)
+        hits = grown[oy[:, None] + ys_o[None, :], ox[:, None] + xs_o[None, :]].any(axis=1)
+        own_share = ys_o.size * 9.0 / float(M * N)     # a placement onto the streak itself
+        return float(min(max(np.mean(hits) - own_share, 0.0), 0.8))
 
     # ----------------------------------------------------------------- records
     def _emit_until(self, t_now: float) -> list[dict]:
@@ -421,7 +473,7 @@ class RainGauge:
             quality.append("too_few_drops")
         n_frames = max(len(frames), 1)
         for flag, share in (("overexposed", 0.1), ("underexposed", 0.5), ("scene_motion", 0.2),
-                            ("lens_obscured", 0.05), ("dropped_frames", 0.0)):
+                            ("lens_obscured", 0.05), ("dropped_frames", 0.0), ("low_contrast", 0.5)):
             hits = sum(1 for fr in frames if flag in fr[1])
             if hits > share * n_frames:
                 quality.append(flag)

@@ -13,6 +13,22 @@ The test is on the log ratio r = ln(v' / V(2 a')) with V the chosen law of
 default), and the tolerance comes from the measurement error: a floor for the
 natural spread of drop speeds plus k standard errors of r, propagated from the
 errors of the width and of the length.
+
+Two focus tests complete it.  With the paper's uniform spreading of a
+defocused drop (Eqs. 23-24) the streak's edges stay sharp but its change drops
+by w / (w + b_c): the photometric focus q = (w / w')^2, from the streak's total
+change and the drop brightness of the sharpest streaks, bounds the blur
+(:func:`photometric_focus`).  With a real lens (a pillbox blur) the edges
+soften and the fitted blur is bounded directly (:func:`passes_blur`).  Without
+them, drops nearer than z0, whose perspective enlargement offsets their blur,
+would pass the velocity law.
+
+Notes
+-----
+The seed text refers to the velocity law of note 28 as "Eq. (??)"; it is
+v = 200 sqrt(a) [GargNayar2007], the large-drop law (see DESIGN.md), which is
+1.5-2.8 times too fast below 0.8 mm: with real rain choose a measured law
+(``gunn_kinzer``, ``atlas1973``, ``beard1976``).
 """
 
 from __future__ import annotations

@@ -659,7 +659,10 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
         order = np.argsort(cx)
         idx = np.arange(1, stats.shape[0])[order]
         cxs = cx[order]
+        narrow = (w <= np.maximum(0.5 * h, 8.0))[order]      # near-vertical pieces only
         for a_i in range(idx.size):
+            if not narrow[a_i]:
+                continue
             ia = idx[a_i]
             xa, ya, wa, ha = stats[ia, :4]
             j = a_i + 1
@@ -667,8 +670,8 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
                 ib = idx[j]
                 xb, yb, wb, hb = stats[ib, :4]
                 gap = max(yb - (ya + ha), ya - (yb + hb))
-                overlap_x = min(xa + wa, xb + wb) - max(xa, xb)
-                if 0 <= gap <= merge_gap_px and overlap_x > -1 and 0.5 <= (wa + 1) / (wb + 1) <= 2.0:
+                if narrow[j] and 0 <= gap <= merge_gap_px and abs(cxs[j] - cxs[a_i]) <= 0.5 * min(wa, wb) + 1.5 \
+                        and 0.5 <= (wa + 1) / (wb + 1) <= 2.0:
                     parent[find(ib)] = find(ia)
                 j += 1
         roots = np.array([find(i) for i in range(stats.shape[0])])
@@ -769,12 +772,18 @@ class StreakProps:
         return xm + x0, ym + y0, slope
 
     @cached_property
+    def _row_width(self) -> float:
+        """Width of the detected pixels along a row (area / rows) [px]."""
+        x0, y0, img, own, other = self._crop
+        rows = int(np.count_nonzero(own.any(axis=1)))
+        return float(own.sum()) / max(rows, 1)
+
+    @cached_property
     def _rows(self):
         """Per-row sums and aligned samples across the streak."""
         x0, y0, img, own, other = self._crop
         xm, ym, slope = self.axis
-        x, y, w, h = self.bbox
-        half = 0.5 * w / math.sqrt(1 + slope * slope) + 1.5 + self.margin_px / 2
+        half = 0.5 * self._row_width + 1.5 + self.margin_px / 2
         rows = np.arange(img.shape[0]) + y0
         cols = np.arange(img.shape[1]) + x0
         centre = xm + slope * (rows - ym)
@@ -859,7 +868,7 @@ class StreakProps:
         if ends is None:
             return None
         top, bot, _ = ends
-        w_guess = max(self.bbox[2] / math.sqrt(1 + self.axis[2] ** 2) - 2, 1.0)
+        w_guess = max(self._row_width / math.sqrt(1 + self.axis[2] ** 2) - 2, 1.0)
         sel = (rows >= top + 0.5 * w_guess + 1) & (rows <= bot - 0.5 * w_guess - 1)
         if sel.sum() < 2:
             mid = 0.5 * (top + bot)

@@ -260,7 +260,12 @@ class Scene:
                 cx = rng.uniform(0, n, size=6)
                 cy = rng.uniform(2 * m / 3, m, size=6)
                 phase = rng.uniform(0, 2 * math.pi, size=6)
-                self._ripples = (amp, k, omega, cx, cy, phase)
+                y0 = (2 * m) // 3
+                yy, xx = np.mgrid[y0:m, 0:n].astype(np.float32)
+                # k |r - c_i| + phase_i, fixed; each frame only shifts the phase by omega_i t
+                spatial = [(k[i] * np.hypot(xx - cx[i], yy - cy[i]) + phase[i]).astype(np.float32)
+                           for i in range(6)]
+                self._ripples = (amp, omega, spatial, y0)
             elif kind == "foliage":
                 amp = p[0] if p else 2.0
                 import cv2
@@ -314,14 +319,11 @@ class Scene:
             map_y = np.repeat(np.arange(half, dtype=np.float32)[:, None], n, axis=1)
             img[:half] = cv2.remap(img, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
         if self._ripples is not None:
-            amp, k_, omega, cx, cy, phase = self._ripples
-            y0 = (2 * m) // 3
-            yy, xx = np.mgrid[y0:m, 0:n].astype(np.float32)
-            wave = np.zeros_like(xx)
-            for i in range(len(k_)):
-                r = np.hypot(xx - cx[i], yy - cy[i])
-                wave += np.sin(k_[i] * r - omega[i] * t + phase[i]) / len(k_)
-            img[y0:] = img[y0:] * (1.0 + amp * 2.0 * wave)
+            amp, omega, spatial, y0 = self._ripples
+            wave = np.zeros_like(spatial[0])
+            for i, field in enumerate(spatial):
+                wave += np.sin(field - np.float32(omega[i] * t))
+            img[y0:] = img[y0:] * (1.0 + (2.0 * amp / len(spatial)) * wave)
         for start, vel, rx, ry, level, texture in self._objects:
             cxy = start + vel * t
             cxy[0] = (cxy[0] + rx) % (n + 2 * rx) - rx

@@ -53,9 +53,11 @@ The truth
 ---------
 Computed from the drops actually generated, never from the nominal parameter:
 at the middle of every exposure the drops inside a reference volume (a box
-inside the viewing frustum around the focus distance, where every diameter is
-generated) give Eq. (28) as ``rain_rate_from_drops``; windows average these
-snapshots.  The DSD of each window is given in the 32 Parsivel classes.
+inside the viewing frustum, by default from 0.8 z0 to 1.25 z0 in depth, where
+every diameter is generated whether visible or not) give Eq. (28) as
+``rain_rate_from_drops``; windows average these snapshots (one window per
+record when replaying a Parsivel file).  ``Simulation.population(times)``
+gives every generated drop at any time, for independent checks.  The DSD of each window is given in the 32 Parsivel classes.
 Per frame, the drops drawn (3-D position at the start of the exposure, radius,
 velocity, image streak end points, depth, blur, beta) and, when asked, the
 rain mask (pixels changed by at least 1 gray level) and the clean frame.
@@ -67,7 +69,14 @@ Notes
   paper's own Eq. 23 approximation) gives every streak pixel this mean.  The
   exposure area pi a_i^2 is exact; the paper's Eqs. (22) and (26) use the
   bounding square 4 a_i^2 instead, so rendered intensity changes are pi/4 of
-  Eqs. (21)-(22) and rendered standard deviations pi/4 of Eq. (27).
+  Eqs. (21)-(22) and rendered standard deviations pi/4 of Eq. (27) (about 0.9
+  of that again, because real pixels integrate a 1-px streak that straddles two
+  of them where Eq. (26) assumes it covers exactly w pixels).
+- Drop counts in any volume are Poisson at every instant; the drops in one
+  volume at two times are not independent (they are the same drops, moved).
+- Sensor noise comes from OpenCV's generator (``cv2.randn``), reseeded for
+  every frame from the simulation's own seed: the video is reproducible, and
+  OpenCV's global random state is changed.
 - The camera is level: gravity is +y (image down).  The wind direction
   ``wind_dir_deg`` is where the wind blows *to*, in the horizontal plane,
   measured from the image's +x axis (0 = to the right) towards the optical
@@ -78,6 +87,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Iterator
@@ -246,7 +256,7 @@ def _capsule_spans(y, x0, y0, x1, y1, r):
     return lo, hi
 
 
-_SCRATCH: dict = {}
+_SCRATCH = threading.local()
 
 
 def _span_entries(rows, xl, xr, weight, n, width):
@@ -271,14 +281,17 @@ def _span_entries(rows, xl, xr, weight, n, width):
 
 
 def _scratch(m: int, width: int):
-    """Reusable accumulation buffers for one image size (not thread-safe)."""
+    """Reusable accumulation buffers for one image size (one set per thread)."""
+    cache = getattr(_SCRATCH, "buffers", None)
+    if cache is None:
+        cache = _SCRATCH.buffers = {}
     key = (m, width)
-    if key not in _SCRATCH:
-        if len(_SCRATCH) > 8:
-            _SCRATCH.clear()
-        _SCRATCH[key] = (np.zeros(m * width, np.float64), np.zeros((m, width), np.float64),
+    if key not in cache:
+        if len(cache) > 8:
+            cache.clear()
+        cache[key] = (np.zeros(m * width, np.float64), np.zeros((m, width), np.float64),
                          np.zeros((m + 1, width + 1), np.float64))
-    return _SCRATCH[key]
+    return cache[key]
 
 
 def render_streaks(shape, p0, p1, radius_px, area_px, *, n_sub: int = 2,
@@ -534,18 +547,18 @@ class _Regions:
     def sample_inside(self, bins, rng):
         """Uniform points inside the regions of ``bins`` (one per entry)."""
         out = np.empty((bins.size, 3))
-        todo = np.arange(bins.size)
-        while todo.size:
-            b = bins[todo]
+        pending = np.arange(bins.size)
+        while pending.size:
+            b = bins[pending]
             z = rng.uniform(self.z0[b], self.z1[b])
             amax = (self.dxs[b] * self.z1[b] + self.dxo[b]) * (self.dys[b] * self.z1[b] + self.dyo[b])
             area = (self.dxs[b] * z + self.dxo[b]) * (self.dys[b] * z + self.dyo[b])
             acc = rng.uniform(size=b.size) * amax < area
-            b, z, idx = b[acc], z[acc], todo[acc]
+            b, z, idx = b[acc], z[acc], pending[acc]
             x = self.sx0[b] * z + self.ox0[b] + rng.uniform(size=b.size) * (self.dxs[b] * z + self.dxo[b])
             y = self.sy0[b] * z + self.oy0[b] + rng.uniform(size=b.size) * (self.dys[b] * z + self.dyo[b])
             out[idx] = np.stack([x, y, z], axis=1)
-            todo = todo[~acc]
+            pending = pending[~acc]
         return out
 
     def sample_face(self, bins, faces, rng):
@@ -739,7 +752,7 @@ class RainVolume:
         return self._pool
 
 
-# ============================================================================ truth helpers
+# ============================================================================ per-frame truth
 class DropTable:
     """Per-frame drop list in columns; also iterable as one dict per drop.
 
@@ -932,7 +945,7 @@ class Simulation:
         """Volume of the reference box [m^3]."""
         return self.ref_volume
 
-    # ---------------------------------------------------------------- helpers
+    # ---------------------------------------------------------------- internals
     def _rngs(self):
         rain, noise, _ = (np.random.default_rng(s) for s in self._children)
         return rain, noise
@@ -978,7 +991,8 @@ class Simulation:
     def _truth_accumulator(self):
         nw = self.window_edges.size - 1
         return {"rate_sum": np.zeros(nw), "snaps": np.zeros(nw, np.int64),
-                "counts": np.zeros((nw, 32)), "drops": np.zeros(nw, np.int64)}
+                "counts": np.zeros((nw, 32)), "drops": np.zeros(nw, np.int64),
+                "moments": np.zeros((nw, 4))}
 
     def _accumulate(self, acc, vol, k):
         t = k / self.fps + 0.5 * self.T
@@ -988,6 +1002,8 @@ class Simulation:
         acc["rate_sum"][w] += _drops.rain_rate_from_drops(d, v, self.ref_volume)
         acc["snaps"][w] += 1
         acc["drops"][w] += d.size
+        dmm = d * 1e3
+        acc["moments"][w] += [np.sum(dmm ** 3), np.sum(dmm ** 4), np.sum(dmm ** 6), 0.0]
         cls = np.searchsorted(_drops.PARSIVEL_D_EDGES_MM * 1e-3, d, side="right") - 1
         ok = (cls >= 0) & (cls < 32)
         acc["counts"][w] += np.bincount(cls[ok], minlength=32)[:32]
@@ -1008,10 +1024,16 @@ class Simulation:
             n_m3_mm = acc["counts"][i] / s / self.ref_volume / widths
             t0, t1 = float(self.window_edges[i]), float(self.window_edges[i + 1])
             nominal = self._nominal_rate(t0, t1)
+            m3, m4, m6, _ = acc["moments"][i] / s / self.ref_volume       # mm^k m^-3
+            z = float(m6)
             windows.append({
                 "t_start_s": t0, "t_end_s": t1, "rain_rate_mm_h": float(rate),
                 "dsd_d_mm": _drops.PARSIVEL_D_CENTRES_MM.tolist(),
                 "dsd_n_m3_mm": [float(x) for x in n_m3_mm],
+                "nt_m3": float(acc["drops"][i] / s / self.ref_volume),
+                "lwc_g_m3": float(math.pi / 6.0 * m3 * 1e-9 * _drops.RHO_WATER * 1e3),
+                "z_mm6_m3": z, "z_dbz": (10.0 * math.log10(z) if z > 0 else None),
+                "dm_mm": (float(m4 / m3) if m3 > 0 else None),
                 "snapshots": s, "mean_drops_in_reference": float(acc["drops"][i] / s),
                 "nominal_rain_rate_mm_h": nominal,
                 "ratio_to_nominal": (float(rate / nominal) if nominal else None),

@@ -25,7 +25,7 @@ from raingauge.vision.candidates import candidates, luminance
 from raingauge.vision.dynamics import DynamicsField, RainDynamics
 from raingauge.vision.motion import WARP_MIN_SHIFT_PX, MotionTracker, transform_magnitude_px, warp_to
 from raingauge.vision.photometric import StreakFits, beta_max_for_exposure, photometric_filter
-from raingauge.vision.removal import remove_rain, run_prefilter
+from raingauge.vision.removal import remove_window, run_prefilter
 
 __all__ = ["detect_streaks", "Derainer", "DerainedFrame", "derain_clip", "estimate_noise_sigma"]
 
@@ -329,33 +329,18 @@ class Derainer:
         region = self._region
         if u.b is None:  # fewer than 3 distinct frames: nothing can be detected
             u.b = np.zeros(u.lum.shape, bool)
+        out_frame = u.raw.copy()
+        replaced = np.zeros(u.lum.shape, bool)
         if top >= 2 and np.any(region):
             ids = [self._reflect(n + o, top) for o in range(-3, 4)]
-            lins, lums = [], []
-            for j in ids:
-                a, _ = self._aligned(j, n, "lin")
-                y, _ = self._aligned(j, n, "lum")
-                lins.append(a)
-                lums.append(y)
-            near = [self._units[j] for j in ids[1:6]]
-            run_cand = None
-            if ids[1:6] == list(range(n - 2, n + 3)) and all(
-                    v.rise is not None and v.fall is not None and not v.warped
-                    and transform_magnitude_px(self._tracker.between(v.k, n), u.lum.shape) < WARP_MIN_SHIFT_PX
-                    for v in near):
-                run_cand = run_prefilter([v.rise for v in near], [v.fall for v in near])
-            derained, replaced = remove_rain(lins, lums, u.b, region, c=self.c, run_candidates=run_cand,
-                                             runs=self.runs, tol=self.tol, grow_px=self.grow_px,
-                                             beta_max=self.beta_max, noise_sigma=self.noise_sigma,
-                                             min_pixels=self.min_pixels)
-            out_frame = u.raw.copy()
-            idx = np.flatnonzero(replaced.ravel())
+            window = _StreamWindow(self, n, ids)
+            idx, vals = remove_window(window, u.b, region, c=self.c, runs=self.runs, tol=self.tol,
+                                      grow_px=self.grow_px, beta_max=self.beta_max,
+                                      noise_sigma=self.noise_sigma, min_pixels=self.min_pixels)
             if idx.size:
                 n_pix = replaced.size
-                out_frame.reshape(n_pix, -1)[idx] = self._to_uint8(derained.reshape(n_pix, -1)[idx])
-        else:
-            replaced = np.zeros(u.lum.shape, bool)
-            out_frame = u.raw.copy()
+                out_frame.reshape(n_pix, -1)[idx] = self._to_uint8(vals).reshape(idx.size, -1)
+                replaced.ravel()[idx] = True
         self.streak_log.append((u.inputs[0], int(u.streaks.accepted.sum()) if u.streaks is not None else 0))
         results = [DerainedFrame(index=i, frame=out_frame, rain=replaced, detected=u.b, region=region,
                                  field=field, repeat=(r > 0)) for r, i in enumerate(u.inputs)]
@@ -364,6 +349,91 @@ class Derainer:
         if old in self._units:
             del self._units[old]
         return results
+
+
+def _sample_bilinear(img: np.ndarray, M: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """Values of ``img`` at ``M (x, y)`` for the flat pixels ``idx`` of the reference frame, (P, C)."""
+    h, w = img.shape[:2]
+    flat = img.reshape(h * w, -1)
+    if np.allclose(M[2], [0, 0, 1]) and np.allclose(M[:2, :2], np.eye(2)) and h > 1 and w > 1:
+        # a translation: one integer offset and one pair of weights for every pixel
+        ix, iy = math.floor(M[0, 2]), math.floor(M[1, 2])
+        fx, fy = np.float32(M[0, 2] - ix), np.float32(M[1, 2] - iy)
+        r = idx // w + iy
+        cc = idx % w + ix
+        r0 = np.clip(r, 0, h - 1)
+        r1 = np.clip(r + 1, 0, h - 1)
+        c0 = np.clip(cc, 0, w - 1)
+        c1 = np.clip(cc + 1, 0, w - 1)
+        return ((1 - fy) * ((1 - fx) * flat[r0 * w + c0] + fx * flat[r0 * w + c1])
+                + fy * ((1 - fx) * flat[r1 * w + c0] + fx * flat[r1 * w + c1]))
+    rows = (idx // w).astype(np.float64)
+    cols = (idx % w).astype(np.float64)
+    x = M[0, 0] * cols + M[0, 1] * rows + M[0, 2]
+    y = M[1, 0] * cols + M[1, 1] * rows + M[1, 2]
+    if not np.allclose(M[2], [0, 0, 1]):
+        z = M[2, 0] * cols + M[2, 1] * rows + M[2, 2]
+        x, y = x / z, y / z
+    x = np.clip(x, 0, w - 1)
+    y = np.clip(y, 0, h - 1)
+    x0 = np.minimum(np.floor(x).astype(np.int64), w - 2 if w > 1 else 0)
+    y0 = np.minimum(np.floor(y).astype(np.int64), h - 2 if h > 1 else 0)
+    fx = (x - x0)[:, None].astype(np.float32)
+    fy = (y - y0)[:, None].astype(np.float32)
+    i00 = y0 * w + x0
+    x1 = 1 if w > 1 else 0
+    y1 = w if h > 1 else 0
+    return ((1 - fy) * ((1 - fx) * flat[i00] + fx * flat[i00 + x1])
+            + fy * ((1 - fx) * flat[i00 + y1] + fx * flat[i00 + y1 + x1]))
+
+
+class _StreamWindow:
+    """Frames n-3 .. n+3 of a :class:`Derainer`, aligned to frame n lazily, pixel by pixel.
+
+    Only the pixels the removal touches are resampled: no full-frame warps.
+    """
+
+    def __init__(self, d: "Derainer", n: int, ids: list[int]):
+        self.d, self.n, self.ids = d, n, ids
+        self.units = [d._units[j] for j in ids]
+        u = d._units[n]
+        self.shape = u.lum.shape
+        self.centre_lum = u.lum
+        self.centre_lin = u.lin
+        self._M = [d._tracker.between(j, n) for j in ids]
+        self._moved = [transform_magnitude_px(M, self.shape) >= WARP_MIN_SHIFT_PX for M in self._M]
+
+    def _at(self, arr, k, idx):
+        if not self._moved[k]:
+            return arr.reshape(arr.shape[0] * arr.shape[1], -1)[idx]
+        return _sample_bilinear(arr, self._M[k], idx)
+
+    def lum_at(self, k: int, idx: np.ndarray) -> np.ndarray:
+        return self._at(self.units[k].lum, k, idx)[:, 0]
+
+    def lin_at(self, k: int, idx: np.ndarray) -> np.ndarray:
+        return self._at(self.units[k].lin, k, idx)
+
+    def run_candidates(self, c: float) -> np.ndarray:
+        import cv2
+
+        near = self.units[1:6]
+        if self.ids[1:6] != list(range(self.n - 2, self.n + 3)) or any(
+                v.rise is None or v.fall is None for v in near):
+            return np.zeros(self.shape, bool)   # the two ends of the stream: no runs
+        rises, falls = [], []
+        for k, v in zip(range(1, 6), near):
+            if not self._moved[k] and not v.warped:
+                rises.append(v.rise)
+                falls.append(v.fall)
+                continue
+            # carry the unit's own one-sided tests into frame n (nearest pixel)
+            h, w = self.shape
+            for src, dst in ((v.rise, rises), (v.fall, falls)):
+                m = cv2.warpAffine(src.view(np.uint8), self._M[k][:2], (w, h),
+                                   flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP)
+                dst.append(m.astype(bool))
+        return run_prefilter(rises, falls)
 
 
 def derain_clip(frames: np.ndarray | Iterable[np.ndarray], profile=None, **kwargs) -> tuple[np.ndarray, np.ndarray]:

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["replace_single", "find_runs", "run_prefilter", "remove_rain", "RUNS"]
+__all__ = ["replace_single", "find_runs", "run_prefilter", "runs_in_values", "remove_rain", "remove_window",
+           "ArrayWindow", "RUNS"]
 
 #: Runs of consecutive rain frames containing the centre (offsets relative to it),
 #: shortest first: two frames, then three.
@@ -105,13 +106,21 @@ def find_runs(lum, *, c: float, where: np.ndarray | None = None, tol: float | No
     if where is None:
         where = np.ones(lum[3].shape, bool)
     flat = np.flatnonzero(np.asarray(where).ravel())
-    if flat.size == 0:
-        e = np.zeros(0, np.int64)
-        return e, e, e
-    v = np.stack([x.ravel()[flat] for x in lum])  # (7, P)
-    before = np.full(flat.size, -1, np.int64)
-    after = np.full(flat.size, -1, np.int64)
-    todo = np.ones(flat.size, bool)
+    v = np.stack([x.ravel()[flat] for x in lum]) if flat.size else np.zeros((7, 0), np.float32)
+    hit, before, after = runs_in_values(v, c=c, tol=tol)
+    return flat[hit], before, after
+
+
+def runs_in_values(v: np.ndarray, *, c: float, tol: float | None = None):
+    """The run test of :func:`find_runs` on a (7, P) matrix of pixel values.
+
+    Returns the bool (P,) hit mask and, for the hits, the indices (0-6) of the
+    unaffected frames before and after the run.
+    """
+    P = v.shape[1]
+    before = np.full(P, -1, np.int64)
+    after = np.full(P, -1, np.int64)
+    todo = np.ones(P, bool)
     for a, e in RUNS:
         ia, ie = 3 + a, 3 + e
         inner = v[ia:ie + 1].min(axis=0)
@@ -123,14 +132,107 @@ def find_runs(lum, *, c: float, where: np.ndarray | None = None, tol: float | No
         after[ok] = ie + 1
         todo &= ~ok
     hit = before >= 0
-    return flat[hit], before[hit], after[hit]
+    return hit, before[hit], after[hit]
+
+
+class ArrayWindow:
+    """Seven frames n-3 .. n+3 already aligned to frame n, as full arrays.
+
+    The interface :func:`remove_window` reads: ``shape``, ``centre_lum``,
+    ``lum_at(k, idx)``, ``lin_at(k, idx)`` and ``run_candidates(c)``.
+    """
+
+    def __init__(self, frames, lum):
+        self.frames = [np.asarray(x, dtype=np.float32) for x in frames]
+        self.lum = [np.asarray(x, dtype=np.float32) for x in lum]
+        if len(self.frames) != 7 or len(self.lum) != 7:
+            raise ValueError("the removal needs the 7 frames n-3 .. n+3")
+        self.shape = self.lum[3].shape
+        self.centre_lum = self.lum[3]
+        self.centre_lin = self.frames[3]
+
+    def lum_at(self, k: int, idx: np.ndarray) -> np.ndarray:
+        return self.lum[k].ravel()[idx]
+
+    def lin_at(self, k: int, idx: np.ndarray) -> np.ndarray:
+        return self.frames[k].reshape(self.lum[3].size, -1)[idx]
+
+    def run_candidates(self, c: float) -> np.ndarray:
+        c32 = np.float32(c)
+        rises = [self.lum[k] - self.lum[k - 1] >= c32 for k in range(1, 6)]
+        falls = [self.lum[k] - self.lum[k + 1] >= c32 for k in range(1, 6)]
+        return run_prefilter(rises, falls)
+
+
+def remove_window(window, rain: np.ndarray, region: np.ndarray, *, c: float, runs: bool = True,
+                  tol: float | None = None, grow_px: int = 1, grow_threshold: float | None = None,
+                  beta_max: float | None = None, noise_sigma: float = 1.0, min_pixels: int = 5
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The rules of Sec. 5.2 on a window of frames; see :func:`remove_rain`.
+
+    Returns
+    -------
+    idx : (P,) int array
+        Flat indices of the replaced pixels of frame n.
+    values : (P, C) float32 array
+        Their background estimates [gray levels].
+    """
+    import cv2
+
+    single = rain & region
+    idx = np.flatnonzero(single.ravel())
+    if grow_px > 0 and idx.size:
+        k = 2 * int(grow_px) + 1
+        near = cv2.dilate(single.view(np.uint8), np.ones((k, k), np.uint8)).astype(bool) & region & ~single
+        nidx = np.flatnonzero(near.ravel())
+        thr = 0.5 * c if grow_threshold is None else grow_threshold
+        change = window.centre_lum.ravel()[nidx] - 0.5 * (window.lum_at(2, nidx) + window.lum_at(4, nidx))
+        grown = nidx[change > thr]
+        if grown.size:
+            single.ravel()[grown] = True
+            idx = np.concatenate([idx, grown])
+    values = 0.5 * (window.lin_at(2, idx) + window.lin_at(4, idx)) if idx.size else None
+    out_idx, out_vals = [idx], [values]
+    if runs and np.any(region):
+        where = region & ~single & window.run_candidates(c)
+        flat = np.flatnonzero(where.ravel())
+        if flat.size:
+            v = np.stack([window.centre_lum.ravel()[flat] if k == 3 else window.lum_at(k, flat) for k in range(7)])
+            hit, before, after = runs_in_values(v, c=c, tol=tol)
+            flat, v = flat[hit], v[:, hit]
+            if flat.size and beta_max is not None:
+                from raingauge.vision.photometric import photometric_filter
+
+                cols = np.arange(flat.size)
+                centre = window.centre_lum
+                bg_before = centre.copy()
+                bg_after = centre.copy()
+                bg_before.ravel()[flat] = v[before, cols]
+                bg_after.ravel()[flat] = v[after, cols]
+                m = np.zeros(centre.shape, bool)
+                m.ravel()[flat] = True
+                ok, _ = photometric_filter(bg_before, centre, bg_after, m, beta_max=beta_max,
+                                           noise_sigma=noise_sigma, min_pixels=min_pixels)
+                keep = ok.ravel()[flat]
+                flat, before, after = flat[keep], before[keep], after[keep]
+            if flat.size:
+                vals = np.empty((flat.size, window.lin_at(3, flat[:1]).shape[-1]), np.float32)
+                for kb in np.unique(before):
+                    for ka in np.unique(after[before == kb]):
+                        sel = (before == kb) & (after == ka)
+                        vals[sel] = 0.5 * (window.lin_at(int(kb), flat[sel]) + window.lin_at(int(ka), flat[sel]))
+                out_idx.append(flat)
+                out_vals.append(vals)
+    idx_all = np.concatenate(out_idx)
+    vals = [x for x in out_vals if x is not None]
+    vals_all = np.concatenate(vals) if vals else np.zeros((0, 1), np.float32)
+    return idx_all, vals_all.astype(np.float32, copy=False)
 
 
 def remove_rain(frames: np.ndarray, lum: np.ndarray, rain: np.ndarray, region: np.ndarray, *, c: float,
                 runs: bool = True, tol: float | None = None, grow_px: int = 1,
                 grow_threshold: float | None = None, beta_max: float | None = None,
-                noise_sigma: float = 1.0, min_pixels: int = 5,
-                run_candidates: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                noise_sigma: float = 1.0, min_pixels: int = 5) -> tuple[np.ndarray, np.ndarray]:
     """Derain the centre frame of a 7-frame window, Sec. 5.2 [GargNayar2007].
 
     Parameters
@@ -164,9 +266,6 @@ def remove_rain(frames: np.ndarray, lum: np.ndarray, rain: np.ndarray, region: n
         Camera noise for that test [gray levels].
     min_pixels : int
         Smallest streak of runs [px].
-    run_candidates : (M, N) bool array, optional
-        Pixels that may hold a run (:func:`run_prefilter`); default computed
-        from ``lum``.
 
     Returns
     -------
@@ -174,49 +273,13 @@ def remove_rain(frames: np.ndarray, lum: np.ndarray, rain: np.ndarray, region: n
     replaced : (M, N) bool array
         Pixels that were changed.
     """
-    import cv2
-
-    frames = [np.asarray(x, dtype=np.float32) for x in frames]
-    lum = [np.asarray(x, dtype=np.float32) for x in lum]
-    if len(frames) != 7 or len(lum) != 7:
-        raise ValueError("remove_rain needs the 7 frames n-3 .. n+3")
-    single = rain & region
-    if grow_px > 0 and np.any(single):
-        k = 2 * int(grow_px) + 1
-        near = cv2.dilate(single.view(np.uint8), np.ones((k, k), np.uint8)).astype(bool) & region & ~single
-        thr = 0.5 * c if grow_threshold is None else grow_threshold
-        change = lum[3] - 0.5 * (lum[2] + lum[4])
-        single = single | (near & (change > thr))
-    out = replace_single(frames[2], frames[3], frames[4], single)
-    replaced = single.copy()
-    if runs and np.any(region):
-        if run_candidates is None:
-            c32 = np.float32(c)
-            rises = [lum[k] - lum[k - 1] >= c32 for k in range(1, 6)]
-            falls = [lum[k] - lum[k + 1] >= c32 for k in range(1, 6)]
-            run_candidates = run_prefilter(rises, falls)
-        flat, before, after = find_runs(lum, c=c, where=region & ~single & run_candidates, tol=tol)
-        if flat.size and beta_max is not None:
-            from raingauge.vision.photometric import photometric_filter
-
-            vals_l = np.stack([x.ravel()[flat] for x in lum])
-            cols = np.arange(flat.size)
-            bg_before = lum[3].copy()
-            bg_after = lum[3].copy()
-            bg_before.ravel()[flat] = vals_l[before, cols]
-            bg_after.ravel()[flat] = vals_l[after, cols]
-            m = np.zeros(lum[3].shape, bool)
-            m.ravel()[flat] = True
-            ok, _ = photometric_filter(bg_before, lum[3], bg_after, m, beta_max=beta_max,
-                                       noise_sigma=noise_sigma, min_pixels=min_pixels)
-            keep = ok.ravel()[flat]
-            flat, before, after = flat[keep], before[keep], after[keep]
-        if flat.size:
-            n_pix = lum[3].size
-            fv = np.stack([x.reshape(n_pix, -1)[flat] for x in frames])  # (7, P, C)
-            cols = np.arange(flat.size)
-            vals = 0.5 * (fv[before, cols] + fv[after, cols])
-            o = out.reshape(n_pix, -1)
-            o[flat] = vals
-            replaced.ravel()[flat] = True
+    win = ArrayWindow(frames, lum)
+    idx, vals = remove_window(win, rain, region, c=c, runs=runs, tol=tol, grow_px=grow_px,
+                              grow_threshold=grow_threshold, beta_max=beta_max, noise_sigma=noise_sigma,
+                              min_pixels=min_pixels)
+    out = win.centre_lin.copy()
+    n = win.centre_lum.size
+    out.reshape(n, -1)[idx] = vals.reshape(idx.size, -1)
+    replaced = np.zeros(win.shape, bool)
+    replaced.ravel()[idx] = True
     return out, replaced
