@@ -21,6 +21,7 @@ from typing import Iterable
 
 import numpy as np
 
+from calibration.frames import linear_gray_frames
 from raingauge.errors import InputError
 
 __all__ = ["DryRunResult", "dry_run", "scene_motion"]
@@ -175,20 +176,13 @@ def dry_run(
 
     if isinstance(frames, np.ndarray) and frames.ndim != 3:
         raise InputError(f"dry run: expected gray frames (T, M, N), got shape {frames.shape}")
-    lut = None if table is None else np.asarray(table, dtype=np.float32)
     beta_max = beta_max_for_exposure(exposure_s)
     meter = _MotionMeter(noise_sigma_dn)
     win: list[np.ndarray] = []
     false = 0
     cand_frac = []
     t = 0
-    for frame in frames:
-        frame = np.asarray(frame)
-        if frame.ndim != 2:
-            raise InputError(f"dry run: expected gray (M, N) frames, got shape {frame.shape}")
-        lin = lut[frame] if (lut is not None and frame.dtype == np.uint8) else frame.astype(np.float32)
-        if win and lin.shape != win[-1].shape:
-            raise InputError("dry run: the frames differ in size. Fix: keep the camera mode fixed")
+    for lin, _codes in linear_gray_frames(frames, table=table, dtype=np.float32, step="dry run"):
         t += 1
         meter.add(lin)
         win = (win + [lin])[-3:]

@@ -27,6 +27,7 @@ from typing import Iterable
 
 import numpy as np
 
+from calibration.frames import camera_device, is_camera
 from raingauge.errors import InputError, SourceError
 
 __all__ = [
@@ -156,10 +157,6 @@ def parse_pattern(text: str) -> tuple[int, int]:
 
 
 # ------------------------------------------------------------------------ input
-def _is_camera(source: str) -> bool:
-    return str(source).startswith("camera:")
-
-
 def read_views(source: str | Path, *, every: int | None = None, limit: int = 60) -> list[tuple[str, np.ndarray]]:
     """Read checkerboard views as (name, gray uint8) pairs.
 
@@ -245,9 +242,8 @@ def capture_views(
     """
     import cv2
 
-    if isinstance(device, str) and _is_camera(device):
-        spec = device.split(":", 1)[1]
-        device = int(spec) if spec.isdigit() else spec
+    if isinstance(device, str) and is_camera(device):
+        device = camera_device(device)
     cap = cv2.VideoCapture(device)
     if not cap.isOpened():
         raise SourceError(f"camera {device!r} cannot be opened. Fix: check the cable/driver, or give a folder of images")
@@ -490,7 +486,7 @@ def calibrate_geometry(
     """
     if isinstance(pattern, str):
         pattern = parse_pattern(pattern)
-    if _is_camera(str(source)):
+    if is_camera(source):
         views = capture_views(str(source), pattern, n_views=n_live_views, on_view=on_view)
     else:
         views = read_views(source)

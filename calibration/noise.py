@@ -29,6 +29,7 @@ from typing import Iterable
 
 import numpy as np
 
+from calibration.frames import linear_gray_frames
 from raingauge.errors import InputError
 
 __all__ = [
@@ -148,23 +149,17 @@ def temporal_moments(frames: Iterable[np.ndarray], *, table: np.ndarray | None =
     quantised : bool
         True when the frames were 8-bit codes (their variance includes quantisation).
     """
-    lut = None if table is None else np.asarray(table, dtype=np.float64)
     t = 0
     quantised = False
     ref = s1 = s2 = None
-    for frame in frames:
-        frame = np.asarray(frame)
-        if frame.ndim != 2:
-            raise InputError(f"noise step: expected gray (M, N) frames, got shape {frame.shape}")
-        quantised = quantised or frame.dtype == np.uint8
-        x = lut[frame] if (lut is not None and frame.dtype == np.uint8) else frame.astype(np.float64)
+    for x, codes in linear_gray_frames(frames, table=table, dtype=np.float64, step="noise step",
+                                       what="still frames"):
+        quantised = quantised or codes
         x = x.ravel()
         if ref is None:
             ref = x.copy()
             s1 = np.zeros_like(x)
             s2 = np.zeros_like(x)
-        elif x.shape != ref.shape:
-            raise InputError("noise step: the still frames differ in size. Fix: keep the camera mode fixed")
         d = x - ref  # shifted sums keep the variance accurate
         s1 += d
         s2 += d * d

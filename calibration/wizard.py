@@ -128,10 +128,6 @@ def _jsonable(value):
     return value
 
 
-def _is_camera(src: str) -> bool:
-    return str(src).startswith("camera:")
-
-
 class _GrayFrames:
     """Gray uint8 frames from a folder, a video or camera:N, read one at a time.
 
@@ -141,17 +137,17 @@ class _GrayFrames:
 
     def __init__(self, src: str, *, limit: int, what: str):
         from raingauge.errors import SourceError
+        from calibration.frames import camera_device, is_camera
         from raingauge.videoio import FrameReader
 
         self.src, self.limit, self.what = str(src), int(limit), what
         self.fps = None
         self.shape = None
         self._reader = None
-        if _is_camera(self.src):
+        if is_camera(self.src):
             import cv2
 
-            spec = self.src.split(":", 1)[1]
-            self._device = int(spec) if spec.isdigit() else spec
+            self._device = camera_device(self.src)
             cap = cv2.VideoCapture(self._device)
             ok = cap.isOpened()
             if ok:
@@ -274,12 +270,13 @@ class Session:
     def run_geometry(self, source: str, *, pattern: str, square_m: float | None, distortion_model="k1k2p1p2",
                      views: int = 10, max_rms_px: float = 1.0) -> dict:
         from calibration import geometry
+        from calibration.frames import is_camera
         from raingauge.errors import InputError
 
         if square_m is None:
             raise InputError("geometry: the size of a checkerboard square is needed. Fix: measure one square "
                              "and give it in metres, e.g. --square-m 0.025")
-        if _is_camera(str(source)):
+        if is_camera(source):
             print(f"move the board through the view: {views} different positions and tilts are collected")
 
         def progress(count, total):
@@ -504,7 +501,7 @@ def run_batch(args, out: Path) -> Session:
         if not focus_asked and session.value("pixel_pitch_m") is None:
             print("== focus plan skipped: the pixel pitch is unknown (give --pixel-pitch-m)")
         else:
-                _report("focus", session.run_focus(pixel_pitch_m=args.pixel_pitch_m, f_numbers=f_numbers,
+            _report("focus", session.run_focus(pixel_pitch_m=args.pixel_pitch_m, f_numbers=f_numbers,
                                                a_min_m=args.a_min_m, focus_m=args.focus_m, f_number=args.f_number))
     if args.dry:
         _report("dry_run", session.run_dry(args.dry))
@@ -759,12 +756,40 @@ def _check_out_dir(out: Path) -> None:
         raise InputError(f"output folder {out.parent} does not exist. Fix: create it or choose another --out")
 
 
+def _check_options(args) -> None:
+    """Refuse impossible numbers before any step runs (a later step must not fail on an option)."""
+    from calibration.geometry import MIN_VIEWS
+    from raingauge.errors import InputError
+
+    def positive(option: str, value, example: str, *, optional: bool = True) -> None:
+        if value is None and optional:
+            return
+        if not (value is not None and math.isfinite(value) and value > 0):
+            raise InputError(f"{option} {value} is not a positive number. Fix: e.g. {option} {example}")
+
+    positive("--square-m", args.square_m, "0.025")
+    positive("--max-rms-px", args.max_rms_px, "1.0", optional=False)
+    positive("--pixel-pitch-m", args.pixel_pitch_m, "3.45e-6")
+    positive("--a-min-m", args.a_min_m, "0.5e-3", optional=False)
+    positive("--focus-m", args.focus_m, "3.0")
+    positive("--f-number", args.f_number, "2.0")
+    if args.views < MIN_VIEWS:
+        raise InputError(f"--views {args.views} is too few; the calibration needs at least {MIN_VIEWS}. "
+                         f"Fix: e.g. --views 10")
+    if not (math.isfinite(args.false_rate) and 0 < args.false_rate < 0.25):
+        raise InputError(f"--false-rate {args.false_rate} must lie between 0 and 0.25 (false candidates per "
+                         "pixel and frame). Fix: e.g. --false-rate 1e-3")
+    if args.f_numbers:
+        _parse_f_numbers(args.f_numbers)
+
+
 def run(args: argparse.Namespace) -> int:
     from raingauge.errors import InputError
 
     out = Path(args.out) if args.out else None
     if out is not None:
         _check_out_dir(out)
+    _check_options(args)
     if args.demo:
         if out is None:
             raise InputError("--demo needs --out PROFILE.toml")

@@ -33,7 +33,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import struct
-from typing import Any, Iterable
+from typing import Any
 
 __all__ = [
     "Field",
@@ -559,13 +559,6 @@ def render_docs() -> str:
         + render_register_table() + "\n## Serial sentences\n\n" + render_nmea_table()
         + "\n## History database and CSV\n\n" + render_sql_table()
     )
-
-
-def iter_sql_columns_with_docs() -> Iterable[tuple[str, str, str, str]]:
-    """(column, SQL type, unit, description) for every stored column."""
-    for f in FIELDS:
-        for c in f.columns:
-            yield c, f.sql_type, f.unit, f.description
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -253,8 +253,9 @@ def make_scene(profile, *, motion="slow", near="far", depth="small", a_ref_m=vis
     z_v = rain_visible_limit_m(profile, a_ref_m=a_ref_m, r_visible=r_visible)
     n_rel, n_label = _category_or_number(near, NEAR_CATEGORIES, "near distance")
     near_m = n_rel * z_v if n_label else n_rel
-    if near_m <= 0:
-        raise ConfigError(f"near distance must be > 0 m, got {near!r}")
+    if not (0 < near_m < math.inf):
+        raise ConfigError(f"near distance must be a finite number of metres > 0, got {near!r}. "
+                          "Fix: use close, far or a distance such as 20")
     d_rel, d_label = _category_or_number(depth, DEPTH_CATEGORIES, "depth range")
     depth_m = d_rel * near_m if d_label else d_rel
     label = " ".join(x for x in (m_label, n_label, d_label) if x)

@@ -187,12 +187,6 @@ class History:
         for values in self.db.execute(sql, params):
             yield dict(zip(cols, values))
 
-    def last_row(self) -> dict[str, Any] | None:
-        cols = csv_header()
-        values = self.db.execute(
-            f"SELECT {', '.join('[' + c + ']' for c in cols)} FROM [{TABLE}] ORDER BY id DESC LIMIT 1").fetchone()
-        return None if values is None else dict(zip(cols, values))
-
     def export_csv(self, out: IO[str], *, start: float | None = None, end: float | None = None) -> int:
         """Write the header and the rows in [start, end] as CSV; return the number of rows."""
         writer = csv.writer(out, lineterminator="\n")

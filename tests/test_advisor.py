@@ -223,3 +223,18 @@ def test_advise_command_errors(capsys):
     assert "slow, fast" in capsys.readouterr().err
     assert main(["advise", "--camera", "gauge-default", "--goal", "gauge", "--a-min-mm", "-1"]) == 2
     assert "--a-min-mm" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--near", "inf"], "finite number of metres"),
+    (["--near", "0"], "finite number of metres"),
+    (["--motion", "nan"], "scene motion"),
+    (["--depth", "-1"], "depth range"),
+    (["--rain-rate", "-3"], "--rain-rate"),
+    (["--rain-rate", "abc"], "invalid float value: 'abc'"),
+    (["--goal", "gauge", "--a-min-mm", "nan"], "--a-min-mm"),
+    (["--camera", "no-such-camera"], "no-such-camera"),
+])
+def test_advise_command_bad_input(cli_error, args, message):
+    argv = ["advise", *args] if args[0] == "--camera" else ["advise", "--camera", "canon_xl1", *args]
+    cli_error(argv, message)

@@ -46,3 +46,27 @@ def test_too_few_frames():
     frames, _ = render_dry_clip(n_frames=3)
     with pytest.raises(InputError, match="at least 5"):
         dry_run(frames, frame_rate_hz=30.0, exposure_s=0.004, c_dn=3.0, noise_sigma_dn=1.0)
+
+
+def test_frames_of_two_sizes_or_colour_frames_are_refused():
+    from calibration.noise import calibrate_noise
+
+    frames, _ = render_dry_clip(n_frames=8, seed=4)
+    mixed = [*frames[:4], frames[4][:, :-2], *frames[5:]]
+    with pytest.raises(InputError, match="differ in size"):
+        dry_run(mixed, frame_rate_hz=30.0, exposure_s=0.004, c_dn=3.0, noise_sigma_dn=1.0)
+    with pytest.raises(InputError, match="still frames differ in size"):
+        calibrate_noise(iter(mixed))
+    colour = [np.dstack([f] * 3) for f in frames]
+    with pytest.raises(InputError, match=r"expected gray \(M, N\) frames"):
+        dry_run(iter(colour), frame_rate_hz=30.0, exposure_s=0.004, c_dn=3.0, noise_sigma_dn=1.0)
+    with pytest.raises(InputError, match=r"expected gray \(M, N\) frames"):
+        calibrate_noise(iter(colour))
+
+
+def test_live_camera_names():
+    from calibration.frames import camera_device, is_camera
+
+    assert is_camera("camera:0") and not is_camera("views/camera:0.png")
+    assert camera_device("camera:2") == 2 and camera_device("camera:/dev/video1") == "/dev/video1"
+    assert not is_camera("views") and not is_camera("clip.mkv")

@@ -293,3 +293,24 @@ def test_unreadable_still_frame_writes_nothing(captures, tmp_path, capsys):
     assert main(["calibrate", "--still", str(still), "--out", str(outdir / "x.toml")]) == 2
     assert "1 image(s) cannot be read" in capsys.readouterr().err
     _assert_nothing_written(outdir)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--false-rate", "2"], "--false-rate"),
+    (["--false-rate", "nan"], "--false-rate"),
+    (["--square-m", "-1"], "--square-m -1.0 is not a positive number"),
+    (["--views", "2"], "at least 5"),
+    (["--f-numbers", "abc"], "F-numbers 'abc'"),
+    (["--a-min-m", "0"], "--a-min-m"),
+    (["--focus-m", "nan"], "--focus-m"),
+    (["--max-rms-px", "0"], "--max-rms-px"),
+    (["--base", "no-such-camera"], "no-such-camera"),
+    (["--square-m", "abc"], "invalid float value: 'abc'"),
+])
+def test_bad_options_are_refused_before_any_step_runs(captures, tmp_path, cli_error, args, message):
+    folder, _ = captures
+    out, err = cli_error(["calibrate", "--checkerboard", folder / "checkerboard", "--square-m", "0.025",
+                          "--still", folder / "still", "--out", tmp_path / "x.toml", *args], message)
+    assert "Fix" in err
+    assert "==" not in out                      # no step reported a result
+    _assert_nothing_written(tmp_path)

@@ -234,3 +234,19 @@ def test_render_streak_cli_bad_input(tmp_path, capsys, args, message):
 def test_render_streak_cli_missing_output_folder(tmp_path, capsys):
     assert main(["render-streak", "--radius-mm", "1", "--out", str(tmp_path / "no" / "s.png")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--light-phi", "nan"], "--light-phi must be a finite number"),
+    (["--amp-axisymmetric", "nan"], "--amp-axisymmetric must be a finite number"),
+    (["--gain", "0"], "--gain"),
+    (["--background", "-1"], "--background"),
+    (["--out", "{tmp}/s.xyz"], "no image of that extension"),
+    (["--npy", "{tmp}/missing/s.npy"], "does not exist"),
+    (["--radius-mm", "abc"], "invalid float value: 'abc'"),
+    (["--exposure-ms", "4", "--fall-speed", "3"], "not allowed with"),
+])
+def test_render_streak_cli_refuses_before_rendering(tmp_path, cli_error, args, message):
+    cli_error(["render-streak", "--radius-mm", "1", "--length-px", "20", "--width-px", "6", "--supersample", "1",
+               "--out", tmp_path / "s.png", *[a.format(tmp=tmp_path) for a in args]], message)
+    assert not list(tmp_path.glob("s.*"))

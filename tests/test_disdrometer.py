@@ -208,3 +208,25 @@ def test_locarno_reflectivity_matches_the_instrument(locarno):
     sel = [r for r in pf.records if r.reported_rate_mm_h > 1.0][::10]
     dz = [dis.record_moments(r.counts)["z_dbz"] - r.reported_z_dbz for r in sel]
     assert abs(np.nanmedian(dz)) < 1.0
+
+
+@pytest.mark.parametrize("content, args, message", [
+    (b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 4, [], "holds no Parsivel telegram"),
+    (b"", [], "holds no Parsivel telegram"),
+    (b"garbage\n", [], "line 1: 1 fields"),
+    (None, [], "is a folder"),
+    (b"x\n", ["--interval", "inf"], "--interval"),
+    (b"x\n", ["--interval", "0"], "--interval"),
+    (b"x\n", ["--interval", "abc"], "invalid float value: 'abc'"),
+])
+def test_dsd_command_bad_input(tmp_path, cli_error, content, args, message):
+    src = tmp_path / "in.dat"
+    if content is None:
+        src = tmp_path
+    else:
+        src.write_bytes(content)
+    out = tmp_path / "out.csv"
+    _, err = cli_error(["dsd", src, "--csv", out, *args], message)
+    assert "Fix" in err or "give" in err
+    # the input is refused before the table is opened: no empty CSV is left behind
+    assert not out.exists()

@@ -161,3 +161,23 @@ def test_drop_view_cli_bad_input(tmp_path, drop_in_canvas, capsys, args, message
 def test_unknown_render_method_is_rejected(line_env):
     with pytest.raises(ValueError, match="valid"):
         dr.render_drop(line_env, size_px=9, method="pathtrace")
+
+
+@pytest.mark.parametrize("args, message", [
+    (["."], "is a folder"),
+    (["garbage.png"], "cannot decode"),
+    (["drop.png", "--out", "{tmp}/o.xyz"], "no image of that extension"),
+    (["drop.png", "--out", "{tmp}/missing/o.png"], "does not exist"),
+    (["drop.png", "--fov", "abc"], "invalid float value: 'abc'"),
+    (["drop.png", "--mu", "0.5"], "--mu"),
+    (["drop.png", "--size", "3"], "--size"),
+    (["drop.png", "--center", "30", "30", "--radius", "0"], "--radius"),
+])
+def test_drop_view_cli_refuses_before_writing(tmp_path, cli_error, args, message):
+    cv2.imwrite(str(tmp_path / "drop.png"), np.full((40, 40), 90, np.uint8))
+    (tmp_path / "garbage.png").write_bytes(b"not an image")
+    rest = [a.format(tmp=tmp_path) for a in args[1:]]
+    if "--out" not in rest:
+        rest += ["--out", str(tmp_path / "o.png")]
+    cli_error(["drop-view", tmp_path / args[0], *rest], message)
+    assert not list(tmp_path.glob("o.*"))

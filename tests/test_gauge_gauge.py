@@ -37,7 +37,7 @@ def heavy():
 def test_heavy_rain_rate_within_tolerance(heavy):
     """40 mm/h on a dark background, gauge on the simulator's velocity law: the 4-s rate
     agrees with the truth (Eq. 28 over the drops the simulator generated) within 35 %
-    (counting noise of ~40 drops), its 95 % interval covers the truth, Dm within 40 %."""
+    (counting noise of ~40 drops), its 95 % interval covers the truth, Dm within 30 % of the DSD's."""
     frames, truth = heavy
     g, recs = _run(frames, window_s=4.0, step_s=4.0, velocity_model="gunn_kinzer")
     assert len(recs) == 1
@@ -47,10 +47,12 @@ def test_heavy_rain_rate_within_tolerance(heavy):
     lo, hi = rec["rain_rate_ci95_mm_h"]
     assert lo <= true_rate <= hi
     assert rec["drops_counted"] > 25
-    true_dm = np.average(truth["windows"][0]["dsd_d_mm"],
-                         weights=np.asarray(truth["windows"][0]["dsd_d_mm"]) ** 3
-                         * np.asarray(truth["windows"][0]["dsd_n_m3_mm"]))
-    assert rec["dm_mm"] == pytest.approx(true_dm, rel=0.4)  # 40 drops; 60-s clips: benchmarks/
+    # Dm of the distribution the drops were drawn from (the truth's small reference box
+    # holds too few large drops in 4 s to fix Dm); 40 drops here, 60-s clips in benchmarks/
+    from raingauge.physics.drops import MarshallPalmer, dsd_moments_continuous
+
+    dsd_dm = dsd_moments_continuous(MarshallPalmer(40.0), velocity_model="gunn_kinzer")["dm_mm"]
+    assert rec["dm_mm"] == pytest.approx(dsd_dm, rel=0.3)
     assert rec["intensity_class"] == "heavy" and rec["synop_4680"] == 63
     # accumulation is the integral of the rate
     assert rec["accumulation_mm"] == pytest.approx(rec["rain_rate_mm_h"] * (rec["t_end_s"] - rec["t_start_s"])

@@ -271,7 +271,7 @@ class StuckOutput:
         self.master, self.slave = os.openpty()  # nobody reads the master: the port fills and stalls
         self.writer = SerialWriter(os.ttyname(self.slave), 9600, queue_size=4, write_timeout_s=0.5,
                                    backoff_s=(0.05, 0.1),
-                                   formatter=lambda rec: ["$" + "X" * 4000 + "\r\n"])
+                                   formatter=lambda rec: ["$" + "X" * 20000 + "\r\n"])
 
     def publish(self, rec):
         self.writer.publish(rec)

@@ -133,3 +133,14 @@ def test_rain_visible_region_edge_is_where_the_change_meets_the_threshold():
     # an undetectable drop has no visible region
     assert camera.rain_visible_distance_m(a, v, focal_length_px=F_PX, exposure_s=t,
                                           contrast_dn=1.0, threshold_dn=threshold) == 0.0
+
+
+@pytest.mark.parametrize("name", ["focal_length_px", "f_number", "focus_distance_m", "pixel_pitch_m"])
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), float("inf")])
+def test_blur_circle_and_depth_of_field_check_every_lens_parameter(name, bad):
+    kw = dict(focal_length_px=F_PX, f_number=2.0, focus_distance_m=2.5, pixel_pitch_m=PITCH)
+    kw[name] = bad
+    with pytest.raises(ValueError, match=name):
+        camera.blur_circle_px(3.0, **kw)
+    with pytest.raises(ValueError, match=name):
+        camera.depth_of_field_m(**kw)

@@ -139,3 +139,12 @@ def test_no_streak_without_exposure_time():
     # T -> 0 limit of Eq. (18): beta = tau / T undefined; a zero-length exposure is refused
     with pytest.raises(ValueError):
         streaks.beta(1e-4, 0.0)
+
+
+@pytest.mark.parametrize("bad", [0.0, -0.01, float("nan"), float("inf"), "fast"])
+def test_every_exposure_argument_is_checked_the_same_way(bad):
+    calls = [lambda: streaks.beta(1e-4, bad), lambda: streaks.beta_max(bad),
+             lambda: streaks.motion_blurred_intensity(1e-4, bad, 100.0, 50.0)]
+    for call in calls:
+        with pytest.raises(ValueError, match="exposure_s must be a finite number > 0"):
+            call()

@@ -240,3 +240,25 @@ def test_simulator_agrees_with_eq27_on_a_small_scene():
                                            radius_m=d / 2, density_m3=rho, velocity_model="gunn_kinzer")
         assert measured[t] / (math.pi / 4 * predicted[t]) == pytest.approx(1.0, abs=0.15)
     assert measured[0.033] / measured[0.016] == pytest.approx(predicted[0.033] / predicted[0.016], rel=0.15)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--radius-mm", "50"], "larger than any raindrop"),
+    (["--radius-mm", "0"], "--radius-mm"),
+    (["--f-number", "nan"], "--f-number"),
+    (["--focus-m", "0.001"], "inside the focal length"),
+    (["--rain-rate", "-1"], "--rain-rate"),
+    (["--camera", "no-such-camera"], "no-such-camera"),
+    (["--exposure-s", "abc"], "invalid float value: 'abc'"),
+    (["--fig15", "{file}"], "is a file, not a folder"),
+    (["--sweep", "focus", "--png", "{missing}/n.png"], "does not exist"),
+    (["--sweep", "focus", "--png", "{tmp}/n.xyz"], "cannot write the plot"),
+])
+def test_visibility_command_bad_input(tmp_path, cli_error, args, message):
+    (tmp_path / "f.txt").write_text("x")
+    fill = dict(file=str(tmp_path / "f.txt"), missing=str(tmp_path / "missing"), tmp=str(tmp_path))
+    argv = ["visibility", "--camera", "canon_xl1", *[a.format(**fill) for a in args]]
+    if args[:2] == ["--camera", "no-such-camera"]:
+        argv = ["visibility", *args]
+    cli_error(argv, message)
+    assert not (tmp_path / "missing").exists() and not list(tmp_path.glob("n.*"))

@@ -41,8 +41,10 @@ def run(args: argparse.Namespace) -> int:
     from raingauge.render.drop import drop_to_perspective, find_drop
 
     src = Path(args.image)
+    if src.is_dir():
+        raise InputError(f"{src} is a folder; give the image file of the drop")
     if not src.is_file():
-        raise InputError(f"image not found: {src}")
+        raise InputError(f"image not found: {src}; give the path of a photograph of the drop")
     img = cv2.imread(str(src), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise InputError(f"cannot decode {src} as an image; give a PNG, JPEG or TIFF file")
@@ -51,6 +53,8 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if not out.parent.exists():
         raise ConfigError(f"output folder {out.parent} does not exist; create it or choose another --out")
+    if not cv2.haveImageWriter(str(out)):
+        raise ConfigError(f"--out {out}: OpenCV writes no image of that extension; use .png, .tif or .jpg")
     if (args.center is None) != (args.radius is None):
         raise ConfigError("give --center X Y and --radius R together, or neither to find the drop "
                           "automatically")

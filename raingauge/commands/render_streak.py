@@ -68,6 +68,12 @@ def run(args: argparse.Namespace) -> int:
     from raingauge.errors import ConfigError, InputError
     from raingauge.render.closeup import closeup_streak
 
+    for name in ("radius_mm", "light_theta", "light_phi", "view_theta", "length_px", "width_px", "exposure_ms",
+                 "fall_speed", "amp_axisymmetric", "amp_transverse", "phase_axisymmetric", "phase_transverse",
+                 "light_size", "ambient", "background", "gain"):
+        value = getattr(args, name)
+        if value is not None and not math.isfinite(value):
+            raise ConfigError(f"--{name.replace('_', '-')} must be a finite number, got {value}")
     if not 0.1 <= args.radius_mm <= 4.0:
         raise ConfigError(f"--radius-mm must be between 0.1 and 4 mm (raindrops), got {args.radius_mm}")
     if not 0.0 <= args.light_theta <= 180.0:
@@ -91,9 +97,18 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--supersample must be between 1 and 8, got {args.supersample}")
     if args.ambient < 0:
         raise ConfigError(f"--ambient must be >= 0, got {args.ambient}")
+    if args.background < 0:
+        raise ConfigError(f"--background must be >= 0, got {args.background}")
+    if args.gain is not None and not args.gain > 0:
+        raise ConfigError(f"--gain must be > 0, got {args.gain}; leave it out to scale the brightest pixel to 255")
     out = Path(args.out)
     if not out.parent.exists():
         raise ConfigError(f"output folder {out.parent} does not exist; create it or choose another --out")
+    if not cv2.haveImageWriter(str(out)):
+        raise ConfigError(f"--out {out}: OpenCV writes no image of that extension; use .png or .tif")
+    if args.npy and not Path(args.npy).parent.is_dir():
+        raise ConfigError(f"--npy {args.npy}: the folder {Path(args.npy).parent} does not exist; "
+                          "create it or choose another path")
     env = None
     if args.envmap:
         path = Path(args.envmap)
@@ -111,15 +126,16 @@ def run(args: argparse.Namespace) -> int:
         amp_transverse=args.amp_transverse, phase_axisymmetric=math.radians(args.phase_axisymmetric),
         phase_transverse=math.radians(args.phase_transverse), environment=env,
         ambient=args.ambient, light_size_rad=math.radians(args.light_size), supersample=args.supersample)
-    if args.background < 0:
-        raise ConfigError(f"--background must be >= 0, got {args.background}")
     image = streak.composite(args.background)
     gain = args.gain if args.gain is not None else 1.0 / max(float(image.max()), 1e-12)
     png = np.clip(np.rint(255.0 * gain * image), 0, 255).astype(np.uint8)
     if not cv2.imwrite(str(out), png):
         raise InputError(f"cannot write {out}; use an image extension OpenCV knows (.png, .tif)")
     if args.npy:
-        np.save(args.npy, np.stack([streak.radiance, streak.coverage]).astype(np.float32))
+        try:
+            np.save(args.npy, np.stack([streak.radiance, streak.coverage]).astype(np.float32))
+        except OSError as exc:
+            raise InputError(f"cannot write {args.npy} ({exc.strerror}); choose a writable path") from None
     print(f"wrote {out} ({png.shape[1]}x{png.shape[0]} px): oscillation {streak.frequency_hz:.1f} Hz, "
           f"fall {streak.fall_speed_m_s:.2f} m/s, exposure {streak.exposure_s * 1e3:.2f} ms, "
           f"pattern period {streak.period_px:.1f} px, peak radiance {streak.radiance.max():.4g}")

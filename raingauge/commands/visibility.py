@@ -226,8 +226,12 @@ def run(args: argparse.Namespace) -> int:
         xs = np.geomspace(lo_hi[0], lo_hi[1], 80)
         ys = sigma_curve(args.sweep, xs, exposure_s=t, f_number=n, focus_distance_m=z0, **common)
         cur_x = {"exposure": t, "f-number": n, "focus": z0}[args.sweep]
-        _plot(args.png, args.sweep, xs, ys,
-              f"{profile.name}: f={f:g} px, T={t * 1e3:g} ms, N={n:g}, z0={z0:g} m", current=(cur_x, s))
+        try:
+            _plot(args.png, args.sweep, xs, ys,
+                  f"{profile.name}: f={f:g} px, T={t * 1e3:g} ms, N={n:g}, z0={z0:g} m", current=(cur_x, s))
+        except (ValueError, OSError) as exc:
+            raise ConfigError(f"--png {args.png}: cannot write the plot ({exc}). "
+                              "Fix: give a writable .png path") from None
         record["png"] = args.png
     if args.json:
         print(json.dumps(record, indent=2))

@@ -10,16 +10,33 @@ the last ``window_s`` seconds::
     records = gauge.flush()
 
 Per frame n (analysed when frame n+1 arrives): linearise, the spike image of
-Eq. (19) smoothed along the fall, labelled streaks with pieces merged
-(:func:`raingauge.gauge.streaks.detect_streaks`), a cheap size/speed screen
-from the labels' boxes, then for each whole (unclipped) streak the sub-pixel
-measurement (:class:`raingauge.gauge.streaks.StreakProps`), the defocus test
-(:mod:`raingauge.gauge.rejection`), the photometric test of Eq. (18) where the
-background has texture, and flux counting: a drop already counted in one of
-the last frames (predicted from its measured image velocity) is not counted
-again.  Each counted drop carries the inverse of the space-time its kind is
-sampled in (:mod:`raingauge.gauge.volume`), and a window of them gives the
-products (:mod:`raingauge.gauge.products`).
+Eq. (19) smoothed along the fall (the direction follows the measured streaks,
+so wind-slanted rain is smoothed along its slant), labelled streaks with
+pieces merged (:func:`raingauge.gauge.streaks.detect_streaks`), a cheap
+size/speed screen from the labels' boxes, then for the whole (unclipped)
+streaks a batched sub-pixel measurement
+(:class:`raingauge.gauge.streaks.StreakProps`) on the change image divided by
+the local contrast E_r - I_b (Eq. 18: this removes the background's texture
+from the streak's profile), the velocity-law test, the photometric test of
+Eq. (18) where the background has texture, the photometric focus test
+(:mod:`raingauge.gauge.rejection`), and flux counting: a drop already counted
+in one of the last frames (predicted from its measured image velocity) is not
+counted again.
+
+Each counted drop carries the inverse of the space-time its kind is sampled in
+(:mod:`raingauge.gauge.volume`): kappa(a) times the rate at which whole
+streaks of its image motion are seen, times the chance that a streak of its
+shape would not have touched another detected streak in this frame (merged
+streaks cannot be measured; the chance is measured by placing the streak's
+own pixels at random in the frame's detection mask).  A window of counted
+drops gives the products (:mod:`raingauge.gauge.products`).
+
+Notes
+-----
+The drop brightness E_r is not known in advance; it is the 90th percentile of
+E_b + 4 Q / (pi w'^2) over the recent law-abiding streaks (the sharpest of
+them: defocus only dims a streak, Eq. 24).  Until ten such streaks were seen,
+the photometric focus test is not applied.
 """
 
 from __future__ import annotations
@@ -47,6 +64,10 @@ from raingauge.gauge.volume import (
 )
 
 __all__ = ["RainGauge", "RECORD_KEYS", "QUALITY_FLAGS"]
+
+#: Drop brightness E_r assumed before any drop was measured [gray levels] (an overcast
+#: sky seen through the drop, Sec. 4.2.3), only for the ``low_contrast`` flag.
+NOMINAL_DROP_BRIGHTNESS_DN = 200.0
 
 #: The record contract (the keys every record carries, in order).
 RECORD_KEYS: tuple[str, ...] = (
@@ -152,6 +173,7 @@ class RainGauge:
         #: why measured streaks were not counted (diagnostics)
         self.rejections: Counter = Counter()
         self._dilated = None
+        self._slopes: deque = deque(maxlen=50)          # streak direction dx/dy of counted drops
         self._rng = np.random.default_rng(12345)
         self._empty_scale = self._typical_drop_rate()
 
@@ -233,10 +255,11 @@ class RainGauge:
         flags = set()
         sub = raw[::4, ::4]
         self._last_mean_bg = float(np.mean(cur[::4, ::4]))
-        if self._brightness and len(self._brightness) >= 10:
-            contrast = float(np.percentile(np.asarray(self._brightness), 90)) - self._last_mean_bg
-            if contrast < 30.0 * self.c:
-                flags.add("low_contrast")
+        e_r = (float(np.percentile(np.asarray(self._brightness), 90)) if len(self._brightness) >= 10
+               else NOMINAL_DROP_BRIGHTNESS_DN)
+        # a focused streak changes a pixel by ~5 % of the drop's contrast (beta ~ pi w / 4 L)
+        if e_r - self._last_mean_bg < 30.0 * self.c:
+            flags.add("low_contrast")
         if float(np.mean(sub >= 250)) > 0.05:
             flags.add("overexposed")
         if float(np.mean(sub)) < 12.0:
@@ -267,11 +290,25 @@ class RainGauge:
         d2 = cv2.subtract(cur, nxt)
         dark_spike = cv2.max(d1, d2)
         flags = self._frame_flags(raw, cur, dark_spike, gap)
-        labels, stats = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px)
+        slope = float(np.median(self._slopes)) if len(self._slopes) >= 5 else 0.0
+        labels, stats = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope)
         rejected = 0
         counted = []
         if stats.shape[0] > 1:
-            counted, rejected = self._measure(labels, stats, change, prev, cur, t)
+            ref_bg = None
+            if self.defocus_model == "uniform" and len(self._brightness) >= 10:
+                # Eq. (18): a streak changes a pixel by beta (E_r - I_b); dividing by the local
+                # contrast removes the background's texture from the streak's profile
+                e_r = float(np.percentile(np.asarray(self._brightness), 90))
+                bg = cv2.subtract(cur, change)
+                ref_bg = float(np.median(bg[::4, ::4]))
+                c_ref = e_r - ref_bg
+                if c_ref > 5.0 * self.c:
+                    denom = np.maximum(np.float32(e_r) - bg, np.float32(0.25 * c_ref))
+                    change = change * (np.float32(c_ref) / denom)
+                else:
+                    ref_bg = None
+            counted, rejected = self._measure(labels, stats, change, prev, cur, t, ref_bg=ref_bg)
         for d in counted:
             self._window_drops.append(d)
             self._accum_mm += d["accum_mm"]
@@ -296,7 +333,7 @@ class RainGauge:
         ok &= np.isfinite(r) & (np.abs(r) < 0.9)
         return np.nonzero(ok)[0] + 1
 
-    def _measure(self, labels, stats, change, prev, cur, t):
+    def _measure(self, labels, stats, change, prev, cur, t, ref_bg=None):
         prof = self.profile
         f = prof.focal_length_px
         z0 = prof.focus_distance_m
@@ -348,13 +385,13 @@ class RainGauge:
                     continue
                 cands.append((sp, w_app, mot, dx, xc, yc, None))
                 continue
-            ib = sp.background_dn
+            ib = sp.background_dn if ref_bg is None else ref_bg
             total = float(exposure_area_px2(plat, mot, w_app))
             focused_contrast = 4.0 * total / (math.pi * w_app * w_app)
             if np.isfinite(ib) and w_app >= 2.5:
                 self._brightness.append(ib + focused_contrast)
             cands.append((sp, w_app, mot, dx, xc, yc, (ib, total)))
-        if self.defocus_model == "uniform" and cands and self._brightness:
+        if self.defocus_model == "uniform" and cands and len(self._brightness) >= 10:
             # the drop brightness E_r: the sharpest of the law-abiding streaks (defocus only dims)
             e_r = float(np.percentile(np.asarray(self._brightness), 90))
         else:
@@ -406,6 +443,7 @@ class RainGauge:
                  "apparent_width_px": w_app, "motion_px": mot,
                  "accum_mm": 1e3 * math.pi / 6 * (2 * a) ** 3 * v * weight}
             self._recent.append(d)
+            self._slopes.append(sp.axis[2])
             counted.append(d)
         return counted, rejected
 
@@ -457,7 +495,7 @@ class RainGauge:
         drops = [d for d in self._window_drops if t0 - 1e-9 <= d["t"] < t1 - 1e-9]
         duration = len(frames) * self._frame_interval
         quality: list[str] = []
-        if partial or duration < 0.999 * self.window_s:
+        if partial or duration < self.window_s - 2.5 * self._frame_interval:
             quality.append("partial_window")
         if duration <= 0:
             prod = _products.window_products([], [], [], 1.0)

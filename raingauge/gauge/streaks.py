@@ -51,6 +51,7 @@ __all__ = [
     "fit_along_profiles",
     "fit_cross_profiles",
     "fit_batch",
+    "fall_kernel",
     "radius_from_width_m",
     "velocity_from_length_m_s",
     "depth_from_blur_m",
@@ -180,56 +181,63 @@ def chord_gauss_profile(xi, *, amplitude: float, centre: float, width: float, si
     return amplitude * half * np.sum(_GL_W * chord * g, axis=-1)
 
 
-def _lm_batch(model, p0, lo, hi, y, wts, *, iters: int = 16):
+def _lm_batch(model, p0, lo, hi, y, wts, *, iters: int = 12):
     """Levenberg-Marquardt on B independent problems at once (padding has weight 0).
 
-    ``model(P)`` maps (B, n) parameters to (B, K) predictions of the B data rows.
+    ``model(P, idx)`` maps (b, n) parameters of the data rows ``idx`` to (b, K)
+    predictions.  Problems that have converged drop out of the iteration.
     Returns (P, J, residuals) with J the (B, K, n) Jacobian of the weighted residuals.
     """
     p = np.clip(np.asarray(p0, dtype=float), lo, hi)
     b, n = p.shape
-    lam = np.full(b, 1e-2)
 
-    def resid(pp):
-        return (model(pp) - y) * wts
+    def resid(pp, idx):
+        return (model(pp, idx) - y[idx]) * wts[idx]
 
-    def jacobian(pp, r0):
+    def jacobian(pp, r0, idx):
         h = 1e-4 * np.maximum(np.abs(pp), 1e-2)
-        cols = []
-        for j in range(n):
-            q = pp.copy()
-            q[:, j] += h[:, j]
-            cols.append((resid(q) - r0) / h[:, j:j + 1])
-        return np.stack(cols, axis=-1)
+        m = pp.shape[0]
+        # all n shifted copies in one model call
+        q = np.repeat(pp[None, :, :], n, axis=0)
+        q[np.arange(n), :, np.arange(n)] += h.T
+        rr = resid(q.reshape(n * m, -1), np.tile(idx, n)).reshape(n, m, -1)
+        return np.moveaxis((rr - r0[None]) / h.T[:, :, None], 0, -1)
 
-    r = resid(p)
+    everything = np.arange(b)
+    r = resid(p, everything)
     cost = np.einsum("bk,bk->b", r, r)
+    jac = jacobian(p, r, everything)
+    lam = np.full(b, 1e-2)
+    active = np.ones(b, bool)
     eye = np.eye(n)
-    jac = jacobian(p, r)
     for _ in range(iters):
-        jtj = np.einsum("bkn,bkm->bnm", jac, jac)
-        g = np.einsum("bkn,bk->bn", jac, r)
+        idx = np.nonzero(active)[0]
+        if idx.size == 0:
+            break
+        ja, ra = jac[idx], r[idx]
+        jtj = np.einsum("bkn,bkm->bnm", ja, ja)
+        g = np.einsum("bkn,bk->bn", ja, ra)
         diag = np.einsum("bnn->bn", jtj)
-        a = jtj + (lam[:, None] * (diag + 1e-9))[:, :, None] * eye
+        a = jtj + (lam[idx, None] * (diag + 1e-9))[:, :, None] * eye
         try:
             step = -np.linalg.solve(a, g[..., None])[..., 0]
         except np.linalg.LinAlgError:
-            step = -g / (lam[:, None] * (diag + 1e-9) + 1e-12)
-        pn = np.clip(p + step, lo, hi)
-        rn = resid(pn)
+            step = -g / (lam[idx, None] * (diag + 1e-9) + 1e-12)
+        pn = np.clip(p[idx] + step, lo[idx], hi[idx])
+        rn = resid(pn, idx)
         cn = np.einsum("bk,bk->b", rn, rn)
-        better = cn < cost
-        gain = np.where(better, (cost - cn) / np.maximum(cost, 1e-300), 0.0)
-        if np.any(better):
-            p[better] = pn[better]
-            r[better] = rn[better]
-            cost[better] = cn[better]
-            jac_new = jacobian(p, r)
-            jac[better] = jac_new[better]
-        lam = np.where(better, np.maximum(lam / 5, 1e-7), np.minimum(lam * 8, 1e8))
-        # done when no problem still improves noticeably (or all are stuck at large damping)
-        if np.all((gain < 1e-5) & (better | (lam > 1e3))):
-            break
+        better = cn < cost[idx]
+        gain = np.where(better, (cost[idx] - cn) / np.maximum(cost[idx], 1e-300), 0.0)
+        up = idx[better]
+        if up.size:
+            p[up] = pn[better]
+            r[up] = rn[better]
+            cost[up] = cn[better]
+            jac[up] = jacobian(p[up], r[up], up)
+        lam[idx] = np.where(better, np.maximum(lam[idx] / 5, 1e-7), np.minimum(lam[idx] * 8, 1e8))
+        # converged: tiny gain after a step, or stuck at large damping
+        done = (better & (gain < 1e-5)) | (lam[idx] > 1e4)
+        active[idx[done]] = False
     return p, jac, r
 
 
@@ -394,11 +402,11 @@ def fit_cross_profiles(data, *, sigma_min: float = SHARP_SIGMA_PX, shape: str = 
         lo = np.array([r[5] for r in rows])
         hi = np.array([r[6] for r in rows])
         if shape == "uniform":
-            def model(P):
-                return _box_gauss_batch(xi, P)
+            def model(P, idx):
+                return _box_gauss_batch(xi[idx], P)
         else:
-            def model(P):
-                return np.stack([_chord_gauss_batch(xi[j], P[j:j + 1])[0] for j in range(P.shape[0])])
+            def model(P, idx):
+                return np.stack([_chord_gauss_batch(xi[i], P[j:j + 1])[0] for j, i in enumerate(idx)])
         p, jac, r = _lm_batch(model, p0, lo, hi, y, wts)
         dof = np.array([row[1].size for row in rows]) - 4
         try:
@@ -525,9 +533,9 @@ def fit_along_profiles(data, *, shape: str = "uniform") -> list[dict]:
     rad = np.array(rad)
     sig = np.array(sig)
 
-    def model(P):
+    def model(P, idx):
         plat, top, bot = P[:, 0:1], P[:, 1:2], P[:, 2:3]
-        return plat * _ends_batch(rows - top, rows - bot, rad, sig, shape)
+        return plat * _ends_batch(rows[idx] - top, rows[idx] - bot, rad[idx], sig[idx], shape)
 
     p, jac, res = _lm_batch(model, np.array(p0), np.array(lo), np.array(hi), y, wts)
     try:
@@ -602,8 +610,32 @@ def change_images(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray) -> tuple[n
     return spike, change
 
 
+def fall_kernel(length_px: int, slope: float = 0.0) -> np.ndarray:
+    """Normalised line kernel of ``length_px`` rows along the fall direction dx/dy = slope.
+
+    Parameters
+    ----------
+    length_px : int
+        Number of rows spanned [px] (odd).
+    slope : float
+        Horizontal image motion per row of the streaks (wind) [px/px].
+    """
+    n = int(length_px)
+    half = n // 2
+    reach = int(math.ceil(abs(slope) * half)) + 1
+    k = np.zeros((n, 2 * reach + 1), np.float32)
+    for i in range(n):
+        x = reach + slope * (i - half)
+        x0 = int(math.floor(x))
+        frac = x - x0
+        k[i, x0] += 1.0 - frac
+        if frac > 0:
+            k[i, x0 + 1] += frac
+    return k / k.sum()
+
+
 def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min_pixels: int = 6,
-                   merge_gap_px: float = 6.0) -> tuple[np.ndarray, np.ndarray]:
+                   merge_gap_px: float = 6.0, slope: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Label candidate streaks: Eq. (19) on a change image smoothed along the fall.
 
     Parameters
@@ -622,6 +654,9 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
         Pieces of one streak (split by a dark background stretch or by noise)
         are merged when they are collinear within their widths and the gap
         between them is at most this [px].
+    slope : float
+        Direction of the fall in the image, dx/dy [px/px] (wind slants the
+        streaks); the smoothing follows it.
 
     Returns
     -------
@@ -635,7 +670,12 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
 
     if not (c > 0 and math.isfinite(c)):
         raise ValueError(f"detection threshold c must be a positive number of gray levels, got {c!r}")
-    s = spike if smooth_px <= 1 else cv2.blur(spike, (1, int(smooth_px)))
+    if smooth_px <= 1:
+        s = spike
+    elif abs(slope) < 0.05:
+        s = cv2.blur(spike, (1, int(smooth_px)))
+    else:
+        s = cv2.filter2D(spike, -1, fall_kernel(int(smooth_px), slope), borderType=cv2.BORDER_REFLECT)
     mask = cv2.compare(s, float(c), cv2.CMP_GE)
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8, ltype=cv2.CV_32S)
     stats = stats[:, :5].copy()

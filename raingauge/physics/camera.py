@@ -18,16 +18,29 @@ import math
 
 import numpy as np
 
+from raingauge.physics._checks import positive as _positive
 
-def _positive(name: str, value: float) -> float:
-    value = float(value)
-    if not (value > 0 and math.isfinite(value)):
-        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
-    return value
+
+def _depth(z_m) -> np.ndarray:
+    """Depths [m] as an array, NaN where z <= 0 (behind the camera)."""
+    z = np.asarray(z_m, dtype=float)
+    return np.where(z > 0, z, np.nan)
+
+
+def _thin_lens(focal_length_px, f_number, focus_distance_m, pixel_pitch_m) -> tuple[float, float, float, float]:
+    """Checked (f_m [m], N [-], z0 [m], p [m]) of a thin lens focused beyond its focal length."""
+    f = _positive("focal_length_px", focal_length_px)
+    n = _positive("f_number", f_number)
+    z0 = _positive("focus_distance_m", focus_distance_m)
+    p = _positive("pixel_pitch_m", pixel_pitch_m)
+    fm = f * p
+    if z0 <= fm:
+        raise ValueError(f"focus_distance_m ({z0} m) must exceed the focal length ({fm} m)")
+    return fm, n, z0, p
 
 
 def project(points_m, *, focal_length_px: float, principal_point_px) -> np.ndarray:
-    """Pinhole projection, u = cx + f x / z, v = cy + f y / z.
+    """Pinhole projection, u = cx + f x / z, v = cy + f y / z [px] (perspective projection of Appendix 10.2 [GargNayar2007]; [Horn1986]).
 
     Parameters
     ----------
@@ -48,15 +61,14 @@ def project(points_m, *, focal_length_px: float, principal_point_px) -> np.ndarr
         raise ValueError(f"points_m must have shape (..., 3), got {p.shape}")
     f = _positive("focal_length_px", focal_length_px)
     c = np.asarray(principal_point_px, dtype=float)
-    z = p[..., 2]
-    zz = np.where(z > 0, z, np.nan)
+    zz = _depth(p[..., 2])
     u = c[0] + f * p[..., 0] / zz
     v = c[1] + f * p[..., 1] / zz
     return np.stack([u, v], axis=-1)
 
 
 def back_project(pixels_px, z_m, *, focal_length_px: float, principal_point_px) -> np.ndarray:
-    """Inverse of :func:`project` at a known depth: x = (u - cx) z / f, y = (v - cy) z / f.
+    """Inverse of :func:`project` at a known depth: x = (u - cx) z / f, y = (v - cy) z / f [m] ([Horn1986]).
 
     Parameters
     ----------
@@ -106,7 +118,7 @@ def image_velocity_px_s(points_m, velocity_m_s, *, focal_length_px: float) -> np
     w = np.asarray(velocity_m_s, dtype=float)
     f = _positive("focal_length_px", focal_length_px)
     p, w = np.broadcast_arrays(p, w)
-    z = np.where(p[..., 2] > 0, p[..., 2], np.nan)
+    z = _depth(p[..., 2])
     du = f * (w[..., 0] * z - p[..., 0] * w[..., 2]) / z ** 2
     dv = f * (w[..., 1] * z - p[..., 1] * w[..., 2]) / z ** 2
     return np.stack([du, dv], axis=-1)
@@ -140,21 +152,14 @@ def blur_circle_px(z_m, *, focal_length_px: float, f_number: float, focus_distan
     ndarray
         Blur-circle diameter [px]; 0 at z = z0; NaN for z <= 0.
     """
-    f = _positive("focal_length_px", focal_length_px)
-    n = _positive("f_number", f_number)
-    z0 = _positive("focus_distance_m", focus_distance_m)
-    p = _positive("pixel_pitch_m", pixel_pitch_m)
-    fm = f * p
-    if z0 <= fm:
-        raise ValueError(f"focus_distance_m ({z0} m) must exceed the focal length ({fm} m)")
-    z = np.asarray(z_m, dtype=float)
-    zz = np.where(z > 0, z, np.nan)
+    fm, n, z0, p = _thin_lens(focal_length_px, f_number, focus_distance_m, pixel_pitch_m)
+    zz = _depth(z_m)
     return (fm / n) * fm * np.abs(zz - z0) / (zz * (z0 - fm)) / p
 
 
 def depth_of_field_m(*, focal_length_px: float, f_number: float, focus_distance_m: float,
                      pixel_pitch_m: float, coc_px: float = 1.0) -> tuple[float, float]:
-    """Near and far limits of the depth of field: where the blur circle equals ``coc_px``.
+    """Near and far limits of the depth of field, thin lens [Horn1986]: where the blur circle equals ``coc_px`` [m].
 
     With K = f_m^2 / (N p (z0 - f_m)) [px] (so that b_c = K |z - z0| / z):
     near = K z0 / (K + c), far = K z0 / (K - c) (infinite when K <= c, i.e.
@@ -178,14 +183,8 @@ def depth_of_field_m(*, focal_length_px: float, f_number: float, focus_distance_
     (near, far) : tuple of float
         Depths [m]; ``far`` may be ``inf``.
     """
-    f = _positive("focal_length_px", focal_length_px)
-    n = _positive("f_number", f_number)
-    z0 = _positive("focus_distance_m", focus_distance_m)
-    p = _positive("pixel_pitch_m", pixel_pitch_m)
+    fm, n, z0, p = _thin_lens(focal_length_px, f_number, focus_distance_m, pixel_pitch_m)
     c = _positive("coc_px", coc_px)
-    fm = f * p
-    if z0 <= fm:
-        raise ValueError(f"focus_distance_m ({z0} m) must exceed the focal length ({fm} m)")
     k = fm * fm / (n * p * (z0 - fm))
     near = k * z0 / (k + c)
     far = k * z0 / (k - c) if k > c else math.inf
@@ -235,14 +234,13 @@ def streak_width_px(radius_m, z_m, *, focal_length_px: float) -> np.ndarray:
     z = z_m = 2 f a, consistent with Sec. 6.1.
     """
     f = _positive("focal_length_px", focal_length_px)
-    z = np.asarray(z_m, dtype=float)
-    zz = np.where(z > 0, z, np.nan)
+    zz = _depth(z_m)
     return np.maximum(2.0 * f * np.asarray(radius_m, dtype=float) / zz, 1.0)
 
 
 def streak_length_px(speed_m_s, z_m, exposure_s: float, *, focal_length_px: float,
                      radius_m=0.0) -> np.ndarray:
-    """Length of a vertical streak, f v T / z plus the drop's image diameter 2 f a / z [px].
+    """Length of a vertical streak, l = f v T / z + 2 f a / z [px] (v_i T of Appendix 10.2 and Eq. (23) [GargNayar2007], plus the drop's image).
 
     Parameters
     ----------
@@ -258,8 +256,7 @@ def streak_length_px(speed_m_s, z_m, exposure_s: float, *, focal_length_px: floa
         Drop radius a [m] (0 gives the motion length alone).
     """
     f = _positive("focal_length_px", focal_length_px)
-    z = np.asarray(z_m, dtype=float)
-    zz = np.where(z > 0, z, np.nan)
+    zz = _depth(z_m)
     return f * (np.asarray(speed_m_s, dtype=float) * exposure_s
                 + 2.0 * np.asarray(radius_m, dtype=float)) / zz
 

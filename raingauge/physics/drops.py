@@ -196,7 +196,7 @@ def velocity_atlas1973(diameter_m):
 
 
 def air_density(pressure_pa: float = P_REF_PA, temperature_k: float = T_REF_K) -> float:
-    """Density of dry air, ideal gas [kg m^-3].
+    """Density of dry air, ideal-gas law rho_a = p / (R_d T) [kg m^-3] (air density of [Beard1976]).
 
     Parameters
     ----------
@@ -209,7 +209,7 @@ def air_density(pressure_pa: float = P_REF_PA, temperature_k: float = T_REF_K) -
 
 
 def air_viscosity(temperature_k: float = T_REF_K) -> float:
-    """Dynamic viscosity of air, Sutherland's law [kg m^-1 s^-1].
+    """Dynamic viscosity of air, Sutherland's law eta = 1.458e-6 T^1.5 / (T + 110.4) [kg m^-1 s^-1] ([Beard1976]).
 
     Parameters
     ----------
@@ -220,7 +220,7 @@ def air_viscosity(temperature_k: float = T_REF_K) -> float:
 
 
 def water_surface_tension(temperature_k: float = T_REF_K) -> float:
-    """Surface tension of water against air [N m^-1], linear in temperature.
+    """Surface tension of water against air, sigma = 0.07564 - 1.4e-4 (T - 273.15) [N m^-1] ([Beard1976] regime 3).
 
     Parameters
     ----------
@@ -316,7 +316,7 @@ def fall_velocity(diameter_m, model: str = "gunn_kinzer", **kw) -> np.ndarray:
     diameter_m : array_like
         Volume-equivalent drop diameter D [m].
     model : str
-        One of :data:`FALL_VELOCITY_MODELS`:
+        One of :data:`FALL_VELOCITY_MODELS` [-]:
 
         ``"paper"``        v = 200 sqrt(a) [GargNayar2007]; 0 <= D <= 7 mm.
         ``"gunn_kinzer"``  the 1949 table, interpolated [GunnKinzer1949]; 0.1-5.8 mm.
@@ -747,7 +747,7 @@ DSD_MODELS: tuple[str, ...] = tuple(_DSD_REGISTRY)
 
 
 def make_dsd(name: str, **params) -> DSD:
-    """Build a DSD by name.
+    """Build a DSD by name: N(D) [m^-4] of [MarshallPalmer1948], a gamma law, or [Testud2001].
 
     Parameters
     ----------
@@ -785,7 +785,7 @@ def rain_rate_mm_h(dsd: DSD, velocity_model: str = "gunn_kinzer", **velocity_kw)
     dsd : DSD
         Drop size distribution (N(D) in m^-4, D in m).
     velocity_model : str
-        A :func:`fall_velocity` model.
+        A :func:`fall_velocity` model [-].
     **velocity_kw
         Keywords of the velocity model (``beard1976``: pressure_pa, temperature_k).
 
@@ -911,14 +911,16 @@ def dsd_moments(d_centres_m, d_widths_m, n_m4, velocities_m_s) -> dict[str, floa
 
 def dsd_moments_continuous(dsd: DSD, velocity_model: str = "gunn_kinzer",
                            **velocity_kw) -> dict[str, float]:
-    """:func:`dsd_moments` of a continuous DSD, by quadrature over its range.
+    """:func:`dsd_moments` of a continuous DSD, by quadrature over its range (Eq. (28) [GargNayar2007] and moments).
 
     Parameters
     ----------
     dsd : DSD
-        The distribution.
+        The distribution, N(D) [m^-4].
     velocity_model : str
-        A :func:`fall_velocity` model (NaN velocities count as 0).
+        A :func:`fall_velocity` model [-] (NaN velocities count as 0).
+    **velocity_kw
+        Keywords of the velocity model (``beard1976``: pressure_pa [Pa], temperature_k [K]).
     """
     x, w = dsd.quadrature()
     v = np.nan_to_num(fall_velocity(x, velocity_model, **velocity_kw), nan=0.0)
@@ -945,11 +947,13 @@ def gamma_for_rain_rate(rain_rate_mm_h: float, mu: float, velocity_model: str = 
     mu : float
         Shape parameter [-] (> -1).
     velocity_model : str
-        Velocity law used in Eq. (28).
+        Velocity law used in Eq. (28) [-].
     nw : float
         Normalised intercept [m^-4].
     d_min_m, d_max_m : float
         Diameter range [m].
+    **velocity_kw
+        Keywords of the velocity model (``beard1976``: pressure_pa [Pa], temperature_k [K]).
 
     Returns
     -------
@@ -987,7 +991,13 @@ def _box_array(box_m) -> np.ndarray:
 
 
 def box_volume_m3(box_m) -> float:
-    """Volume of an axis-aligned box ((x0, x1), (y0, y1), (z0, z1)) [m^3]."""
+    """Volume V = (x1 - x0)(y1 - y0)(z1 - z0) of an axis-aligned box [m^3] (the V of Sec. 3 [GargNayar2007]).
+
+    Parameters
+    ----------
+    box_m : array_like, shape (3, 2)
+        ((x0, x1), (y0, y1), (z0, z1)) [m].
+    """
     box = _box_array(box_m)
     return float(np.prod(box[:, 1] - box[:, 0]))
 
@@ -1010,13 +1020,23 @@ def poisson_count(density_m3: float, volume_m3: float, rng: np.random.Generator)
 
 
 def uniform_positions(n: int, box_m, rng: np.random.Generator) -> np.ndarray:
-    """``n`` positions uniform in a box, p(r) = 1/V [GargNayar2007, Sec. 3] -> (n, 3) [m]."""
+    """``n`` positions uniform in a box, p(r) = 1/V [GargNayar2007, Sec. 3] -> (n, 3) [m].
+
+    Parameters
+    ----------
+    n : int
+        Number of positions [-].
+    box_m : array_like, shape (3, 2)
+        ((x0, x1), (y0, y1), (z0, z1)) [m].
+    rng : numpy.random.Generator
+        Random source.
+    """
     box = _box_array(box_m)
     return rng.uniform(box[:, 0], box[:, 1], size=(int(n), 3))
 
 
 def sample_drops_in_box(dsd: DSD, box_m, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """A random snapshot of rain in a box: Poisson count, uniform positions, DSD diameters.
+    """A random snapshot of rain in a box: Poisson count, uniform positions, DSD diameters [GargNayar2007, Sec. 3].
 
     Parameters
     ----------
@@ -1075,7 +1095,7 @@ SHAPE_D_MAX_M = 9.0e-3
 
 
 def shape_coefficients(diameter_m) -> np.ndarray:
-    """Cosine-series coefficients c_0..c_10 of the equilibrium drop shape [-].
+    """Cosine-series coefficients c_0..c_10 of the equilibrium drop shape of Eq. (1) [GargNayar2007] [-].
 
     Parameters
     ----------

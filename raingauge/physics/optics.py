@@ -78,7 +78,7 @@ def fresnel_reflectance(incidence_rad, mu):
 
 
 def refraction_angle(incidence_rad, mu):
-    """Snell's law: the angle of refraction q = asin(sin(i) / mu) [rad].
+    """Snell's law: the angle of refraction q = asin(sin(i) / mu) [rad] (the q of Eqs. (7)-(13) [GargNayar2007]; [BornWolf1999]).
 
     Parameters
     ----------
@@ -219,7 +219,7 @@ def internal_reflection_mapping(theta_n, phi_n, *, n_reflections, alpha=0.0, mu=
     theta_n, phi_n : array_like
         Surface normal [rad].
     n_reflections : int
-        Number N >= 1 of internal reflections.
+        Number N >= 1 of internal reflections [-].
     alpha : float or array_like
         Angle of the camera ray from the optical axis [rad].
     mu : float
@@ -286,7 +286,7 @@ def transfer_internal(incidence_rad, mu=MU_WATER, *, n_reflections=1):
     mu : float
         Refractive index of the drop [-].
     n_reflections : int
-        Number N >= 1 of internal reflections.
+        Number N >= 1 of internal reflections [-].
 
     Notes
     -----
@@ -298,7 +298,7 @@ def transfer_internal(incidence_rad, mu=MU_WATER, *, n_reflections=1):
 
 
 def direction(theta, phi):
-    """Unit vector of the (signed, planar) angles (theta, phi) [rad] -> (..., 3).
+    """Unit vector (sin theta cos phi, sin theta sin phi, cos theta) of the (signed, planar) angles of Fig. 5 [GargNayar2007] [-] -> (..., 3).
 
     Parameters
     ----------
@@ -313,7 +313,18 @@ def direction(theta, phi):
 
 
 def angles(vec):
-    """Inverse of :func:`direction`: (theta in [0, pi], phi in (-pi, pi]) of unit vectors (..., 3)."""
+    """Inverse of :func:`direction`: theta = acos(z), phi = atan2(y, x) of unit vectors (Fig. 5 [GargNayar2007]) [rad].
+
+    Parameters
+    ----------
+    vec : array_like, shape (..., 3)
+        Unit vectors [-].
+
+    Returns
+    -------
+    (theta, phi) : tuple of ndarray
+        theta in [0, pi], phi in (-pi, pi] [rad].
+    """
     v = np.asarray(vec, dtype=float)
     theta = np.arccos(np.clip(v[..., 2], -1.0, 1.0))
     phi = np.arctan2(v[..., 1], v[..., 0])
@@ -339,7 +350,7 @@ def composite_radiance(theta_n, phi_n, environment, *, alpha=0.0, mu=MU_WATER, n
     mu : float
         Refractive index of the drop [-].
     n_internal : int
-        Highest number of internal reflections kept (the paper keeps 2).
+        Highest number of internal reflections kept (the paper keeps 2) [-].
     components : sequence of str
         Any of "refraction", "specular", "internal".
 
@@ -451,7 +462,9 @@ def mean_transfer(mu=MU_WATER, *, component="refraction", n_samples=20001):
     component : str
         "refraction" (R), "specular" (S), "internal1", "internal2" (P with N = 1, 2),
         "total" (R + S + P1 + P2, Eq. 14), or "interface" (1 - k: the light that
-        crosses one air-water surface, Eq. 8 without the mu^2 factor).
+        crosses one air-water surface, Eq. 8 without the mu^2 factor) [-].
+    n_samples : int
+        Quadrature points [-].
 
     Notes
     -----
@@ -459,8 +472,6 @@ def mean_transfer(mu=MU_WATER, *, component="refraction", n_samples=20001):
     that refracted light "is only attenuated by 6%".  The disc average of the
     single-surface transmission 1 - k is 0.934 for water, which matches those
     figures; the disc average of R = (1 - k)^2 (both surfaces, Eq. 9) is 0.881.
-    n_samples : int
-        Quadrature points [-].
     """
     funcs = {
         "refraction": lambda i: transfer_refraction(i, mu),

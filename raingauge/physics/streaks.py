@@ -17,6 +17,7 @@ import math
 
 import numpy as np
 
+from raingauge.physics._checks import positive
 from raingauge.physics.drops import fall_velocity
 
 #: the paper's largest drop radius [m] (Appendix 10.2)
@@ -31,7 +32,7 @@ def exposure_intensity(times_s, irradiance) -> float | np.ndarray:
     times_s : array_like, shape (K,)
         Increasing sample times spanning the exposure [0, T] [s].
     irradiance : array_like, shape (..., K)
-        Irradiance at the pixel at those times (drop or background).
+        Irradiance at the pixel at those times (drop or background) [irradiance unit, e.g. gray levels s^-1].
 
     Returns
     -------
@@ -53,9 +54,14 @@ def motion_blurred_intensity(tau_s, exposure_s, e_drop_mean, e_background):
     exposure_s : float
         Exposure time T [s].
     e_drop_mean : array_like
-        Time-averaged irradiance due to the drop E_r-bar.
+        Time-averaged irradiance due to the drop E_r-bar [irradiance unit].
     e_background : array_like
-        Background irradiance E_b (constant over the exposure).
+        Background irradiance E_b (constant over the exposure) [irradiance unit].
+
+    Returns
+    -------
+    ndarray
+        I_r [irradiance unit x s].
     """
     tau = np.asarray(tau_s, dtype=float)
     _check_tau(tau, exposure_s)
@@ -70,7 +76,7 @@ def delta_intensity(tau_s, e_drop_mean, e_background):
     tau_s : array_like
         Time the drop covers the pixel [s].
     e_drop_mean, e_background : array_like
-        Drop and background irradiance.
+        Drop and background irradiance [irradiance unit].
     """
     return np.asarray(tau_s, dtype=float) * (np.asarray(e_drop_mean, dtype=float)
                                              - np.asarray(e_background, dtype=float))
@@ -86,10 +92,7 @@ def beta(tau_s, exposure_s):
     exposure_s : float
         Exposure time T [s].
     """
-    t = float(exposure_s)
-    if not t > 0:
-        raise ValueError(f"exposure_s must be > 0, got {exposure_s!r}")
-    return np.asarray(tau_s, dtype=float) / t
+    return np.asarray(tau_s, dtype=float) / positive("exposure_s", exposure_s)
 
 
 def alpha(tau_s, e_drop_mean):
@@ -100,7 +103,7 @@ def alpha(tau_s, e_drop_mean):
     tau_s : array_like
         Time the drop covers the pixel [s].
     e_drop_mean : array_like
-        Time-averaged drop irradiance.
+        Time-averaged drop irradiance [irradiance unit].
     """
     return np.asarray(tau_s, dtype=float) * np.asarray(e_drop_mean, dtype=float)
 
@@ -111,7 +114,7 @@ def delta_from_background(i_background, *, beta: float, alpha: float):
     Parameters
     ----------
     i_background : array_like
-        Background intensity I_b = E_b T at the streak's pixels.
+        Background intensity I_b = E_b T at the streak's pixels [intensity, irradiance unit x s].
     beta : float
         Slope tau / T [-].
     alpha : float
@@ -175,7 +178,7 @@ def tau_max_s(radius_m: float = A_MAX_M, velocity_model: str = "paper", **veloci
     radius_m : float
         Largest drop radius a_max [m] (default the paper's 3.5 mm).
     velocity_model : str
-        A fall-velocity model of :func:`raingauge.physics.drops.fall_velocity`.
+        A fall-velocity model of :func:`raingauge.physics.drops.fall_velocity` [-].
 
     Returns
     -------
@@ -209,7 +212,7 @@ def beta_max(exposure_s: float, *, radius_m: float = A_MAX_M, velocity_model: st
     radius_m : float
         Largest drop radius [m].
     velocity_model : str
-        Fall-velocity model for tau_max.
+        Fall-velocity model for tau_max [-].
 
     Returns
     -------
@@ -222,15 +225,12 @@ def beta_max(exposure_s: float, *, radius_m: float = A_MAX_M, velocity_model: st
     typical exposure; 1.18 ms / 33.3 ms would give 0.035.  In general the
     bound scales as 1/T.
     """
-    t = float(exposure_s)
-    if not (t > 0 and math.isfinite(t)):
-        raise ValueError(f"exposure_s must be > 0, got {exposure_s!r}")
+    t = positive("exposure_s", exposure_s)
     return tau_max_s(radius_m, velocity_model, **velocity_kw) / t
 
 
 def _check_tau(tau: np.ndarray, exposure_s: float) -> None:
-    if not exposure_s > 0:
-        raise ValueError(f"exposure_s must be > 0, got {exposure_s!r}")
+    positive("exposure_s", exposure_s)
     if np.any(tau < 0) or np.any(tau > exposure_s):
         raise ValueError("tau_s must lie in [0, exposure_s]: a drop cannot cover a pixel "
                          "for longer than the exposure")

@@ -89,6 +89,7 @@ import math
 import numpy as np
 
 from raingauge.physics import camera as _camera
+from raingauge.physics._checks import positive
 
 __all__ = [
     "A_REF_M",
@@ -217,8 +218,9 @@ def delta_i_near(radius_m, *, velocity_m_s, exposure_s, contrast=1.0):
 def delta_i_far(radius_m, z_m, *, velocity_m_s, exposure_s, focal_length_px, contrast=1.0):
     """Intensity change of a focused drop with z > z_m, Eq. (22) [GargNayar2007].
 
-    dI = k0 4 f a^2 / (z v T) (L_r - L_b): the drop covers pi (f a / z)^2 of
-    the pixel for tau = z / (f v) (Appendix 10.3(a)); equals Eq. (21) at
+    dI = k0 4 f a^2 / (z v T) (L_r - L_b): the drop's image, taken as its
+    bounding square (2 f a / z)^2 as in the paper, covers that fraction of the
+    pixel for tau = z / (f v) (Appendix 10.3(a)); equals Eq. (21) at
     z = z_m = 2 f a.
 
     Parameters
@@ -234,6 +236,12 @@ def delta_i_far(radius_m, z_m, *, velocity_m_s, exposure_s, focal_length_px, con
     Returns
     -------
     dI : float or ndarray
+
+    Notes
+    -----
+    The image of a far drop is a disc of area pi (f a / z)^2, pi/4 of the
+    square the paper's 4 f a^2 stands for; a renderer that draws discs (the
+    simulator) shows pi/4 of this change (tests/test_visibility.py).
     """
     a = np.asarray(radius_m, dtype=float)
     return contrast * 4.0 * focal_length_px * a**2 / (np.asarray(z_m) * velocity_m_s * exposure_s)
@@ -242,7 +250,19 @@ def delta_i_far(radius_m, z_m, *, velocity_m_s, exposure_s, focal_length_px, con
 def delta_i_focused(radius_m, z_m, *, velocity_m_s, exposure_s, focal_length_px, contrast=1.0):
     """Eq. (21) for z <= z_m = 2 f a and Eq. (22) beyond [GargNayar2007].
 
-    Parameters as :func:`delta_i_far`.
+    Parameters
+    ----------
+    radius_m : float or array [m]
+    z_m : float or array [m]
+        Depth of the drop.
+    velocity_m_s : float or array [m/s]
+    exposure_s : float [s]
+    focal_length_px : float [px]
+    contrast : float [gray levels]
+
+    Returns
+    -------
+    dI : float or ndarray [same unit as ``contrast``]
     """
     a = np.asarray(radius_m, dtype=float)
     z = np.asarray(z_m, dtype=float)
@@ -263,7 +283,7 @@ def delta_i_defocused(delta_i, *, width_px, blur_px, streak_length_px=None):
 
     Parameters
     ----------
-    delta_i : float or array
+    delta_i : float or array [gray levels]
         Change of the focused streak (Eqs. 21-22).
     width_px : float or array [px]
         Focused streak width w (>= 1; for far drops w = 1 since Eq. (22)
@@ -402,8 +422,7 @@ def _check_g_inputs(radius_m, focal_length_px, f_number, focus_distance_m, pixel
     for name, value in (("focal_length_px", focal_length_px), ("f_number", f_number),
                         ("focus_distance_m", focus_distance_m), ("pixel_pitch_m", pixel_pitch_m),
                         ("r_visible", r_visible)):
-        if not (np.isfinite(value) and value > 0):
-            raise ValueError(f"{name} must be positive and finite, got {value!r}")
+        positive(name, value)
     if not (np.isfinite(z_near_m) and z_near_m >= 0):
         raise ValueError(f"z_near_m must be >= 0 [m], got {z_near_m!r}")
     if focus_distance_m <= focal_length_px * pixel_pitch_m:
@@ -431,7 +450,7 @@ def visibility_g(radius_m=A_REF_M, *, focal_length_px, f_number, focus_distance_
         R of the rain-visible region.
     z_near_m : float [m]
         Nearest depth included.
-    method : {"closed_form", "numerical"}
+    method : {"closed_form", "numerical"} [-]
         ``closed_form``: the piecewise-logarithmic form (module docstring);
         ``numerical``: adaptive quadrature of the integrand built from the
         camera's blur circle and streak width (scalar radius only).
@@ -494,8 +513,18 @@ def visibility_g_cases(radius_m=A_REF_M, *, focal_length_px, f_number, focus_dis
 
     Scalar radius.  Case 1: z0 > R z_m; case 2: z_m < z0 <= R z_m;
     case 3: z1 < z0 <= z_m (z1 = ``z_near_m``).  Requires z1 < z_m; raises
-    ValueError for z0 <= z1 (not a case of the paper).  Parameters as
-    :func:`visibility_g`; H = K z0 with K from the camera's blur circle.
+    ValueError for z0 <= z1 (not a case of the paper).  H = K z0 with K from
+    the camera's blur circle.
+
+    Parameters
+    ----------
+    radius_m : float [m]
+    focal_length_px : float [px]
+    f_number : float [-]
+    focus_distance_m : float [m]
+    pixel_pitch_m : float [m]
+    r_visible : float [-]
+    z_near_m : float [m]
 
     Returns
     -------
@@ -574,7 +603,7 @@ def sigma_r(*, exposure_s, f_number, focus_distance_m, focal_length_px, pixel_pi
     density_m3 : float [m^-3]
         Number density rho of that size.
     dsd : object, optional
-        A drop size distribution with ``number_density(diameter_m) -> m^-4``,
+        A drop size distribution (N(D) [m^-4], D [m]) with ``number_density(diameter_m) -> m^-4``,
         ``d_min_m`` and ``d_max_m`` (raingauge.physics.drops classes).
     velocity_model : str or callable
         A name of raingauge.physics.drops.FALL_VELOCITY_MODELS, or a function
@@ -583,7 +612,7 @@ def sigma_r(*, exposure_s, f_number, focus_distance_m, focal_length_px, pixel_pi
         k0 (L_r - L_b); 1 gives sigma_r in units of the drop contrast.
     r_visible : float [-]
     z_near_m : float [m]
-    n_sizes : int
+    n_sizes : int [-]
         Diameter nodes of the (composite Simpson) size integral.
 
     Returns
@@ -594,8 +623,7 @@ def sigma_r(*, exposure_s, f_number, focus_distance_m, focal_length_px, pixel_pi
     -----
     The constant is 16 a^4 (the printed 4 a^4 is a slip; see the module Notes).
     """
-    if not (np.isfinite(exposure_s) and exposure_s > 0):
-        raise ValueError(f"exposure_s must be positive [s], got {exposure_s!r}")
+    positive("exposure_s", exposure_s)
     geo = dict(focal_length_px=focal_length_px, f_number=f_number, focus_distance_m=focus_distance_m,
                pixel_pitch_m=pixel_pitch_m, r_visible=r_visible, z_near_m=z_near_m)
     if dsd is None:

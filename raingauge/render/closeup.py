@@ -220,13 +220,12 @@ class CloseupStreak:
 
 
 def _terminal_speed(radius_m: float) -> float:
-    try:
-        from raingauge.physics.drops import fall_velocity
-        v = float(fall_velocity(2.0 * radius_m, model="gunn_kinzer"))
-        if np.isfinite(v) and v > 0:
-            return v
-    except (ImportError, ValueError):  # pragma: no cover - physics ships with the package
-        pass
+    """Terminal speed [m/s]: the Gunn-Kinzer table, or the paper's v = 200 sqrt(a) beyond its 5.8 mm end."""
+    from raingauge.physics.drops import fall_velocity
+
+    v = float(fall_velocity(2.0 * radius_m, model="gunn_kinzer"))
+    if np.isfinite(v) and v > 0:
+        return v
     return 200.0 * math.sqrt(radius_m)
 
 

@@ -45,6 +45,22 @@ nearly independent of it; ``drop_brightness_dn``).  Edge pixels get the
 fraction of their area inside the streak (exact horizontally, two samples per
 row vertically).  Contributions of several drops add (Eq. 25's layers).
 
+Close-up drops (Sec. 9; option ``closeup``, off by default)
+-----------------------------------------------------------
+A drop whose focused image is wide enough for its internal pattern to matter
+and sharp enough for the pattern to survive the defocus (2 a_i >= 6 px and
+b_c <= 0.5 x 2 a_i, :func:`closeup_selection`) can be drawn, instead of the
+uniform capsule, as the ray-traced streak of an oscillating drop
+(:mod:`raingauge.render.closeup`): its (2, 0) and (2, 1) modes oscillate at
+Rayleigh's frequency with amplitudes and phases fixed per drop from the seed
+(:func:`closeup_oscillations`), so the streak's brightness repeats every fall
+distance per oscillation period.  Streaks are traced at quantised sizes and
+phases (cached), warped onto the drop's image segment, normalised to the
+uniform model's exposure area pi a_i^2 and mean brightness E_r (so the
+deposit of Eqs. 15-17 is unchanged), and blurred with the drop's blur circle
+(:func:`render_closeup_drops`).  The lighting is the overcast sky (uniform
+ambient) or the sky plus a light (``closeup_light``).
+
 Then the sensor: the profile's radiometric response (``profile.delinearize``'s
 inverse table), Gaussian noise of ``noise_sigma_dn`` gray levels, 8-bit
 quantisation and optional JPEG compression.
@@ -111,6 +127,12 @@ __all__ = [
     "DEFAULT_DROP_BRIGHTNESS_DN",
     "DEFAULT_RENDER_THRESHOLD_DN",
     "DEFAULT_PIXEL_PITCH_M",
+    "closeup_selection",
+    "closeup_oscillations",
+    "render_closeup_drops",
+    "CLOSEUP_MIN_WIDTH_PX",
+    "CLOSEUP_MAX_BLUR_RATIO",
+    "CLOSEUP_LIGHT_TO_SKY",
 ]
 
 #: E_r: linear brightness of a drop [gray levels] (overcast sky refracted by the drop, Sec. 4.2.3)
@@ -437,6 +459,293 @@ def compose_rain(background, beta, *, drop_brightness_dn: float = DEFAULT_DROP_B
     np.multiply(out, beta, out=out, casting="same_kind")
     out += bg
     return out
+
+
+# ============================================================================ close-up drops (Sec. 9)
+#: close-up drawing: smallest focused streak width 2 a_i for the oscillation pattern to show [px]
+CLOSEUP_MIN_WIDTH_PX = 6.0
+#: close-up drawing: largest blur circle b_c, as a fraction of the focused width 2 a_i [-]
+CLOSEUP_MAX_BLUR_RATIO = 0.5
+#: peak radiance of the close-up light relative to the sky (``closeup_light``) [-]
+CLOSEUP_LIGHT_TO_SKY = 100.0
+#: close-up streaks are traced at most this wide and then scaled to the drop's width [px]
+_CLOSEUP_MAX_RENDER_WIDTH_PX = 12
+#: ... and with at most this many pixels of width x length (longer streaks are traced smaller)
+_CLOSEUP_MAX_RENDER_AREA_PX = 12 * 360
+#: quantisation of the close-up streaks (so that the streak cache hits)
+_CLOSEUP_RADIUS_STEP = 0.04          # relative step of the radius grid (log) [-]
+_CLOSEUP_FALL_STEP_PX = 2.0          # fall length at the traced scale [px]
+_CLOSEUP_VIEW_STEP_RAD = 0.1         # elevation of the line of sight [rad]
+_CLOSEUP_PHASES = 8                  # phase of the (2, 0) mode at the start of the exposure
+_CLOSEUP_REL_PHASES = 4              # phase of the (2, 1) mode relative to the (2, 0) mode
+_CLOSEUP_AZIMUTHS = 4                # azimuth of the (2, 1) mode over [0, pi)
+#: oscillation amplitudes drawn per drop (peak fractional radius change) [-]
+CLOSEUP_AMPLITUDES_AXISYMMETRIC = (0.03, 0.06, 0.09)
+CLOSEUP_AMPLITUDES_TRANSVERSE = (0.0, 0.03, 0.06)
+
+
+def closeup_selection(width_px, blur_px, *, min_width_px: float = CLOSEUP_MIN_WIDTH_PX,
+                      max_blur_ratio: float = CLOSEUP_MAX_BLUR_RATIO) -> np.ndarray:
+    """Which drops are drawn as close-up streaks of an oscillating drop (Sec. 9 [GargNayar2007]).
+
+    A drop qualifies when its focused image is wide enough for the pattern its
+    oscillations make inside the streak to be resolved, 2 a_i >= ``min_width_px``,
+    and its thin-lens blur circle (Eq. 23) does not wash that pattern out,
+    b_c <= ``max_blur_ratio`` x 2 a_i.  The glints and dark bands of the pattern
+    are about a quarter to half of the drop's width across; a blur of half the
+    width keeps them as visible modulations of the streak.
+
+    Parameters
+    ----------
+    width_px : array_like, shape (n,)
+        Focused drop image diameter 2 a_i = 2 f a / z [px] (not clipped at 1 px).
+    blur_px : array_like, shape (n,)
+        Blur circle diameter b_c [px].
+    min_width_px : float
+        Smallest focused width [px].
+    max_blur_ratio : float
+        Largest b_c / (2 a_i) [-].
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+    """
+    w = np.asarray(width_px, dtype=np.float64)
+    b = np.asarray(blur_px, dtype=np.float64)
+    return (w >= float(min_width_px)) & (b <= float(max_blur_ratio) * w)
+
+
+def _pillbox_kernel(diameter_px: float) -> np.ndarray:
+    """Normalised disc of diameter ``diameter_px`` (thin-lens blur, Eq. 23), anti-aliased (8 x 8 samples)."""
+    r = 0.5 * float(diameter_px)
+    half = int(math.ceil(r + 0.5))
+    s = (np.arange(8) + 0.5) / 8 - 0.5
+    c = np.arange(-half, half + 1)
+    yy = (c[:, None, None, None] + s[None, None, :, None])
+    xx = (c[None, :, None, None] + s[None, None, None, :])
+    k = ((xx ** 2 + yy ** 2) <= r * r).mean(axis=(2, 3))
+    if k.sum() <= 0:
+        k[half, half] = 1.0
+    return (k / k.sum()).astype(np.float32)
+
+
+def closeup_oscillations(ids, seed_sequence) -> dict:
+    """Oscillation amplitudes and phases of drops, fixed per drop id (Sec. 9 [GargNayar2007]).
+
+    Each drop keeps its oscillation from frame to frame: the values come from a
+    generator seeded by the simulation's seed and the drop's id, so they do not
+    depend on which other drops exist or on the order of drawing.
+
+    Parameters
+    ----------
+    ids : array_like of int, shape (n,)
+        Drop ids.
+    seed_sequence : numpy.random.SeedSequence
+        The simulation's seed sequence for oscillations.
+
+    Returns
+    -------
+    dict of ndarray (n,)
+        ``amp_axisymmetric``, ``amp_transverse`` [-] (from
+        :data:`CLOSEUP_AMPLITUDES_AXISYMMETRIC`, :data:`CLOSEUP_AMPLITUDES_TRANSVERSE`),
+        ``phase_axisymmetric``, ``phase_transverse`` [rad] (uniform in [0, 2 pi)),
+        ``transverse_azimuth`` [rad] (uniform in [0, pi)).
+    """
+    ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+    out = {k: np.empty(ids.size) for k in ("amp_axisymmetric", "amp_transverse", "phase_axisymmetric",
+                                            "phase_transverse", "transverse_azimuth")}
+    ss = seed_sequence
+    for i, drop_id in enumerate(ids):
+        rng = np.random.default_rng(np.random.SeedSequence(ss.entropy, spawn_key=(*ss.spawn_key, int(drop_id))))
+        u = rng.uniform(size=5)
+        out["amp_axisymmetric"][i] = CLOSEUP_AMPLITUDES_AXISYMMETRIC[int(u[0] * len(CLOSEUP_AMPLITUDES_AXISYMMETRIC))]
+        out["amp_transverse"][i] = CLOSEUP_AMPLITUDES_TRANSVERSE[int(u[1] * len(CLOSEUP_AMPLITUDES_TRANSVERSE))]
+        out["phase_axisymmetric"][i] = 2.0 * math.pi * u[2]
+        out["phase_transverse"][i] = 2.0 * math.pi * u[3]
+        out["transverse_azimuth"][i] = math.pi * u[4]
+    return out
+
+
+def _closeup_render_size(width_px: float, fall_px: float):
+    """Traced width and fall [px] of a close-up streak, quantised, and the scale factor to the image."""
+    w_r = int(min(max(round(width_px), 2), _CLOSEUP_MAX_RENDER_WIDTH_PX))
+    while True:
+        s = w_r / width_px
+        fall_r = _CLOSEUP_FALL_STEP_PX * round(fall_px * s / _CLOSEUP_FALL_STEP_PX)
+        if w_r * (fall_r + w_r) <= _CLOSEUP_MAX_RENDER_AREA_PX or w_r <= 4:
+            return w_r, float(fall_r)
+        w_r -= 1
+
+
+def render_closeup_drops(shape, p0, p1, radius_m, image_radius_px, blur_px, *, exposure_s: float,
+                         drop_brightness_dn: float, oscillation: dict, start_time_s=0.0,
+                         view_theta_rad=0.0, light=None, cache: dict | None = None):
+    """Close-up streaks of oscillating drops, defocused, as exposure layers (Sec. 9, Eqs. 15-17, 23).
+
+    Each drop's streak is traced by :func:`raingauge.render.closeup.cached_closeup_streak`
+    (its oscillating shape ray-traced at instants over the exposure while it
+    falls) at a quantised size, mapped onto the image segment p0-p1 by an
+    affine warp (the traced drop width to 2 a_i across, the traced fall to
+    |p1 - p0| along), normalised (below), and convolved with the drop's blur
+    circle b_c (a disc, Eq. 23).  Compose a linear frame as
+
+        I = I_b (1 - coverage) + radiance
+
+    (on top of the uniform streaks: ``I += radiance - coverage I_b``).
+
+    Normalisation.  Every streak's coverage sums to the uniform model's
+    exposure area pi a_i^2 [px^2] (Eqs. 15-17: the exposure integral of a
+    drop over all pixels), and its radiance to E_r pi a_i^2: the drop's mean
+    brightness is the simulator's E_r (Sec. 4.2.3), which the close-up
+    renderer's lighting distributes within the drop.  On a uniform background
+    a close-up streak therefore deposits exactly pi a_i^2 (E_r - I_b) gray-level
+    pixels, as the uniform capsule does; only the distribution differs.  The
+    traced coverage before normalisation is reported (``raw_area_ratio``, traced
+    coverage sum / pi (w_r / 2)^2): it is below 1 by the side-view area of the
+    oblate equilibrium shape, gamma^(1/3) for axis ratio gamma (0.93-1 for
+    D <= 4 mm), and by the pixel sampling (a few per cent).
+
+    Parameters
+    ----------
+    shape : (int, int)
+        Image shape (M, N).
+    p0, p1 : array_like, shape (n, 2)
+        Drop centre at the start and end of the exposure (x, y) [px].
+    radius_m : array_like, shape (n,)
+        Drop radius a [m].
+    image_radius_px : array_like, shape (n,)
+        a_i = f a / z [px].
+    blur_px : array_like, shape (n,)
+        Blur circle diameter b_c [px].
+    exposure_s : float
+        Exposure time T [s].
+    drop_brightness_dn : float
+        E_r, the drop's mean linear brightness [gray levels].
+    oscillation : dict of array_like (n,)
+        As returned by :func:`closeup_oscillations` (amplitudes [-], phases at t = 0 [rad]).
+    start_time_s : float or array_like (n,)
+        Time at the start of the exposure [s] (the oscillation's phase).
+    view_theta_rad : float or array_like (n,)
+        Elevation of the line of sight below the horizontal [rad].
+    light : (float, float) or None
+        (theta, phi) of a light [rad] in :mod:`raingauge.render.closeup`'s convention,
+        :data:`CLOSEUP_LIGHT_TO_SKY` times as bright as the sky; None: the sky only.
+    cache : dict, optional
+        Traced streaks by quantised key, kept across calls.
+
+    Returns
+    -------
+    coverage, radiance : ndarray, shape (M, N), float32
+        Exposure fraction covered by the drops [-]; radiance they contribute [gray levels].
+    info : dict of ndarray (n,)
+        ``period_px`` (fall per oscillation period in the image [px]), ``frequency_hz``,
+        ``render_width_px``, ``render_fall_px``, ``raw_area_ratio``, ``phase_index``.
+    """
+    import cv2
+
+    from raingauge.render.closeup import cached_closeup_streak
+    from raingauge.render.oscillation import rayleigh_frequency_hz
+
+    m, n = int(shape[0]), int(shape[1])
+    p0 = np.asarray(p0, dtype=np.float64).reshape(-1, 2)
+    p1 = np.asarray(p1, dtype=np.float64).reshape(-1, 2)
+    count = p0.shape[0]
+    a = np.asarray(radius_m, dtype=np.float64).reshape(-1)
+    a_i = np.asarray(image_radius_px, dtype=np.float64).reshape(-1)
+    blur = np.asarray(blur_px, dtype=np.float64).reshape(-1)
+    t_start = np.broadcast_to(np.asarray(start_time_s, dtype=np.float64), (count,))
+    view = np.broadcast_to(np.asarray(view_theta_rad, dtype=np.float64), (count,))
+    osc = {k: np.broadcast_to(np.asarray(v, dtype=np.float64), (count,)) for k, v in oscillation.items()}
+    e_r = float(drop_brightness_dn)
+    coverage = np.zeros((m, n), np.float32)
+    radiance = np.zeros((m, n), np.float32)
+    info = {k: np.zeros(count) for k in ("period_px", "frequency_hz", "render_width_px", "render_fall_px",
+                                         "raw_area_ratio", "phase_index")}
+    light_key = None if light is None else tuple(float(v) for v in light)
+    lighting = ({"ambient": 1.0} if light_key is None
+                else {"ambient": 1.0, "light_radiance": CLOSEUP_LIGHT_TO_SKY})
+    step = math.log1p(_CLOSEUP_RADIUS_STEP)
+    two_pi = 2.0 * math.pi
+    for i in range(count):
+        a_q = float(math.exp(round(math.log(a[i]) / step) * step))
+        freq = float(rayleigh_frequency_hz(a_q))
+        width = 2.0 * a_i[i]
+        seg = p1[i] - p0[i]
+        length = float(np.hypot(*seg))
+        w_r, fall_r = _closeup_render_size(width, length)
+        # phases: the (2, 0) mode's phase at the start of the exposure, the (2, 1) mode relative to it
+        phi = (osc["phase_axisymmetric"][i] + two_pi * freq * t_start[i]) % two_pi
+        q = int(round(phi / two_pi * _CLOSEUP_PHASES)) % _CLOSEUP_PHASES
+        rel = (osc["phase_transverse"][i] - osc["phase_axisymmetric"][i]) % two_pi
+        qr = int(round(rel / two_pi * _CLOSEUP_REL_PHASES)) % _CLOSEUP_REL_PHASES
+        qa = int(round(osc["transverse_azimuth"][i] % math.pi / math.pi * _CLOSEUP_AZIMUTHS)) % _CLOSEUP_AZIMUTHS
+        psi20 = two_pi * q / _CLOSEUP_PHASES
+        psi21 = psi20 + two_pi * qr / _CLOSEUP_REL_PHASES
+        vt = _CLOSEUP_VIEW_STEP_RAD * round(float(view[i]) / _CLOSEUP_VIEW_STEP_RAD)
+        amp20 = round(float(osc["amp_axisymmetric"][i]), 4)
+        amp21 = round(float(osc["amp_transverse"][i]), 4)
+        key = (a_q, w_r, fall_r, vt, amp20, amp21, q, qr, qa, light_key, float(exposure_s))
+        streak = None if cache is None else cache.get(key)
+        if streak is None:
+            streak = cached_closeup_streak(
+                a_q, length_px=fall_r + w_r, width_px=float(w_r), light_dir=light_key, view_theta=vt,
+                exposure_s=float(exposure_s), amp_axisymmetric=amp20, amp_transverse=amp21,
+                phase_axisymmetric=psi20, phase_transverse=psi21,
+                transverse_azimuth=math.pi * qa / _CLOSEUP_AZIMUTHS, supersample=2,
+                time_samples_per_px=1.0, **lighting)
+            if cache is not None:
+                if len(cache) >= 1024:
+                    cache.clear()
+                cache[key] = streak
+        # affine map from the traced patch (col, row) to the image (x, y)
+        scale_c = width / w_r
+        scale_a = length / streak.fall_px if streak.fall_px > 0 and length > 1e-6 else scale_c
+        u = seg / length if length > 1e-6 else np.array([0.0, 1.0])
+        nrm = np.array([u[1], -u[0]])
+        cs = np.asarray(streak.centre_start_px, dtype=np.float64)
+        anchor = p0[i]
+        if streak.fall_px <= 0:          # a fall shorter than the trace's quantum: the still drop, mid-way
+            anchor = 0.5 * (p0[i] + p1[i])
+        lin = np.stack([nrm * scale_c, u * scale_a], axis=1)            # columns: patch x, patch y
+        h_p, w_p = streak.coverage.shape
+        corners = np.array([[-0.5, -0.5], [w_p - 0.5, -0.5], [-0.5, h_p - 0.5], [w_p - 0.5, h_p - 0.5]])
+        img_corners = (corners - cs) @ lin.T + anchor
+        kernel = _pillbox_kernel(blur[i]) if blur[i] >= 1.0 else None
+        margin = 2 + (kernel.shape[0] // 2 if kernel is not None else 0)
+        x0 = int(math.floor(img_corners[:, 0].min())) - margin
+        y0 = int(math.floor(img_corners[:, 1].min())) - margin
+        x1 = int(math.ceil(img_corners[:, 0].max())) + margin
+        y1 = int(math.ceil(img_corners[:, 1].max())) + margin
+        if x1 < 0 or y1 < 0 or x0 >= n or y0 >= m:
+            continue
+        mat = np.concatenate([lin, (anchor - lin @ cs - np.array([x0, y0]))[:, None]], axis=1)
+        size = (x1 - x0 + 1, y1 - y0 + 1)
+        cov = cv2.warpAffine(np.ascontiguousarray(streak.coverage, np.float32), mat, size,
+                             flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        rad = cv2.warpAffine(np.ascontiguousarray(streak.radiance, np.float32), mat, size,
+                             flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        area = math.pi * a_i[i] ** 2
+        c_sum = float(cov.sum(dtype=np.float64))
+        r_sum = float(rad.sum(dtype=np.float64))
+        if c_sum <= 0:
+            continue
+        cov *= np.float32(area / c_sum)
+        if r_sum > 0:
+            rad *= np.float32(e_r * area / r_sum)
+        if kernel is not None:
+            cov = cv2.filter2D(cov, -1, kernel, borderType=cv2.BORDER_CONSTANT)
+            rad = cv2.filter2D(rad, -1, kernel, borderType=cv2.BORDER_CONSTANT)
+        ya, yb, xa, xb = max(y0, 0), min(y1, m - 1), max(x0, 0), min(x1, n - 1)
+        if ya <= yb and xa <= xb:
+            coverage[ya:yb + 1, xa:xb + 1] += cov[ya - y0:yb - y0 + 1, xa - x0:xb - x0 + 1]
+            radiance[ya:yb + 1, xa:xb + 1] += rad[ya - y0:yb - y0 + 1, xa - x0:xb - x0 + 1]
+        info["period_px"][i] = length / (float(exposure_s) * freq)
+        info["frequency_hz"][i] = freq
+        info["render_width_px"][i] = w_r
+        info["render_fall_px"][i] = streak.fall_px
+        info["raw_area_ratio"][i] = float(streak.coverage.sum(dtype=np.float64)) / (math.pi * (w_r / 2.0) ** 2)
+        info["phase_index"][i] = q
+    return coverage, radiance, info
 
 
 # ============================================================================ visibility
@@ -850,7 +1159,8 @@ class Simulation:
     def __init__(self, profile, *, n_frames, segments, edges, velocity_model, wind, scene,
                  seed, truth_masks, truth_clean, truth_drops, truth_linear, drop_brightness_dn, render_threshold_dn,
                  depth_range_m, reference_depth_m, truth_window_s, jpeg_quality, noise, pixel_pitch_m,
-                 assumptions, rain_description, window_edges=None):
+                 assumptions, rain_description, window_edges=None, closeup=False, closeup_light=None,
+                 closeup_min_width_px=CLOSEUP_MIN_WIDTH_PX, closeup_max_blur_ratio=CLOSEUP_MAX_BLUR_RATIO):
         self.profile = profile
         self.n_frames = int(n_frames)
         self.segments = segments
@@ -934,6 +1244,11 @@ class Simulation:
         self.window_edges = np.asarray(window_edges, dtype=float)
         self._truth = None
         self._children = np.random.SeedSequence(seed).spawn(3)
+        self.closeup = bool(closeup)
+        self.closeup_light = None if closeup_light is None else tuple(float(v) for v in closeup_light)
+        self.closeup_min_width = float(closeup_min_width_px)
+        self.closeup_max_blur = float(closeup_max_blur_ratio)
+        self._closeup_cache = {}
 
     @property
     def reference_box_m(self) -> np.ndarray:
@@ -1043,7 +1358,7 @@ class Simulation:
         prof = self.profile.to_dict()
         if self.profile.pixel_pitch_m is None:
             prof["pixel_pitch_m_assumed"] = self.pitch
-        return {
+        truth = {
             "camera": prof,
             "n_frames": self.n_frames,
             "frame_rate_hz": self.fps,
@@ -1077,6 +1392,19 @@ class Simulation:
                                     for a, b in zip(self.z_lo, self.z_hi)],
             },
             "assumptions": self.assumptions,
+        }
+        if self.closeup:
+            self._closeup_truth(truth)
+        return truth
+
+    def _closeup_truth(self, truth):
+        truth["rendering"]["closeup"] = {
+            "rule": "drops with focused width 2 f a / z >= min_width_px and blur circle <= max_blur_ratio x "
+                    "that width are drawn as ray-traced streaks of oscillating drops (Sec. 9), normalised to "
+                    "the uniform model's exposure area pi a_i^2 and mean brightness E_r",
+            "min_width_px": self.closeup_min_width, "max_blur_ratio": self.closeup_max_blur,
+            "light_theta_phi_rad": None if self.closeup_light is None else list(self.closeup_light),
+            "light_to_sky": None if self.closeup_light is None else CLOSEUP_LIGHT_TO_SKY,
         }
 
     def _nominal_rate(self, t0, t1):
@@ -1128,6 +1456,28 @@ class Simulation:
             vol.forget_before(t)
 
     # ---------------------------------------------------------------- frames
+    def _draw_closeup(self, lin, bg, vol, k, ids_idx, pa, caps):
+        """Add the close-up streaks of drops ``ids_idx`` to the linear frame ``lin`` (in place)."""
+        cols = vol.columns
+        ids = cols["id"][ids_idx]
+        osc = closeup_oscillations(ids, self._children[2])
+        mid = pa + 0.5 * self.T * cols["vel"][ids_idx]
+        view = np.arctan2(mid[:, 1], np.hypot(mid[:, 0], mid[:, 2]))
+        cov, rad, info = render_closeup_drops(
+            self.profile.shape, caps["p0"], caps["p1"], 0.5 * cols["d"][ids_idx], caps["image_radius_px"],
+            caps["blur_px"], exposure_s=self.T, drop_brightness_dn=self.e_r, oscillation=osc,
+            start_time_s=k / self.fps, view_theta_rad=view, light=self.closeup_light,
+            cache=self._closeup_cache)
+        # I = I_b (1 - coverage) + radiance on top of the uniform streaks
+        np.multiply(cov, bg, out=cov)
+        np.subtract(rad, cov, out=rad)
+        lin += rad
+        np.maximum(lin, 0.0, out=lin)
+        info["id"] = ids
+        info["amp_axisymmetric"] = osc["amp_axisymmetric"]
+        info["amp_transverse"] = osc["amp_transverse"]
+        return info
+
     def __len__(self):
         return self.n_frames
 
@@ -1142,10 +1492,32 @@ class Simulation:
         lin_buf = np.empty(shape, np.float32)
         for k in range(self.n_frames):
             idx, pa, caps = self._frame_drops(vol, k)
-            beta, beta_in = render_streaks(shape, caps["p0"], caps["p1"], caps["radius_px"], caps["area_px"],
-                                           _view=True)
+            near = None
+            if self.closeup and idx.size:
+                near = closeup_selection(2.0 * caps["image_radius_px"], caps["blur_px"],
+                                         min_width_px=self.closeup_min_width,
+                                         max_blur_ratio=self.closeup_max_blur)
+                if not near.any():
+                    near = None
+            if near is None:
+                beta, beta_in = render_streaks(shape, caps["p0"], caps["p1"], caps["radius_px"],
+                                               caps["area_px"], _view=True)
+            else:
+                far = ~near
+                beta, beta_far = render_streaks(shape, caps["p0"][far], caps["p1"][far], caps["radius_px"][far],
+                                                caps["area_px"][far], _view=True)
+                beta_in = np.empty(idx.size)
+                beta_in[far] = beta_far
+                # beta of the equivalent uniform capsule (Eq. 18) for the close-up drops
+                r_c = caps["radius_px"][near]
+                len_c = np.hypot(*(caps["p1"][near] - caps["p0"][near]).T)
+                beta_in[near] = caps["area_px"][near] / (2.0 * r_c * len_c + math.pi * r_c ** 2)
             bg = self.scene.frame(k)
             lin = compose_rain(bg, beta, drop_brightness_dn=self.e_r, out=lin_buf)
+            closeup_info = None
+            if near is not None:
+                closeup_info = self._draw_closeup(lin, bg, vol, k, idx[near], pa[near],
+                                                  {key: val[near] for key, val in caps.items()})
             frame = sensor(lin, owned=not (self.truth_masks or self.truth_linear))
             self._accumulate(acc, vol, k)
             ft: dict[str, Any] = {"index": k, "t_s": k / self.fps}
@@ -1158,6 +1530,11 @@ class Simulation:
                     "streak_px": np.stack([caps["p0"], caps["p1"]], axis=1),
                     "depth_m": caps["depth_m"], "width_px": caps["width_px"], "blur_px": caps["blur_px"],
                     "beta": beta_in, "tau_s": beta_in * self.T})
+            if self.closeup:
+                ft["closeup"] = closeup_info if closeup_info is not None else {
+                    key: np.zeros(0) for key in ("id", "period_px", "frequency_hz", "render_width_px",
+                                                 "render_fall_px", "raw_area_ratio", "phase_index",
+                                                 "amp_axisymmetric", "amp_transverse")}
             if self.truth_linear:
                 ft["linear"] = lin.copy()
                 ft["linear_clean"] = bg
@@ -1271,7 +1648,9 @@ def simulate(profile, *, seconds=None, n_frames=None, rain_rate_mm_h=None, dsd=N
              background="uniform:60", motion=None, seed=0, truth_masks=False, truth_clean=False,
              truth_drops=True, truth_linear=False, drop_brightness_dn=DEFAULT_DROP_BRIGHTNESS_DN,
              render_threshold_dn=DEFAULT_RENDER_THRESHOLD_DN, depth_range_m=None, reference_depth_m=None,
-             truth_window_s=10.0, jpeg_quality=None, noise=True) -> Simulation:
+             truth_window_s=10.0, jpeg_quality=None, noise=True, closeup=False, closeup_light=None,
+             closeup_min_width_px=CLOSEUP_MIN_WIDTH_PX,
+             closeup_max_blur_ratio=CLOSEUP_MAX_BLUR_RATIO) -> Simulation:
     """Simulate rain in front of a camera (Secs. 3, 4.3, 6 [GargNayar2007]).
 
     Parameters
@@ -1332,6 +1711,27 @@ def simulate(profile, *, seconds=None, n_frames=None, rain_rate_mm_h=None, dsd=N
         Compress every frame as JPEG with this quality (1-100).
     noise : bool
         Add the profile's sensor noise.
+    closeup : bool
+        Draw drops near the camera whose focused image is large and sharp
+        enough (:func:`closeup_selection`: 2 a_i >= ``closeup_min_width_px``,
+        b_c <= ``closeup_max_blur_ratio`` x 2 a_i) as ray-traced streaks of
+        oscillating drops (Sec. 9, :func:`render_closeup_drops`) instead of
+        uniform capsules; each deposits the same exposure as its capsule.
+        Off by default: tracing costs about 0.2 s of CPU per drawn close-up
+        streak (cached for repeated quantised sizes), so with the
+        gauge-default profile at 10 mm/h (~0.75 such drops per frame) the
+        frame rate falls from ~45 to a few frames/s (benchmarks/bench_simulator.py).
+        Each frame's truth then has ``closeup`` (ids of the drops so drawn,
+        their oscillation amplitudes, the fall per oscillation period
+        ``period_px``, ...) and the truth's ``rendering`` the rule used.
+    closeup_light : (float, float), optional
+        (theta, phi) [rad] of a light :data:`CLOSEUP_LIGHT_TO_SKY` times as
+        bright as the sky, in :mod:`raingauge.render.closeup`'s convention
+        (theta = 0: from behind the camera, pi: behind the drop; phi from image
+        right towards image up); None (default): sky only, a uniform ambient
+        (the pattern is then that of the drop's oscillating outline only).
+    closeup_min_width_px, closeup_max_blur_ratio : float
+        The selection rule's thresholds [px], [-].
 
     Returns
     -------
@@ -1368,6 +1768,16 @@ def simulate(profile, *, seconds=None, n_frames=None, rain_rate_mm_h=None, dsd=N
         raise ConfigError(f"render_threshold_dn must be >= 0, got {render_threshold_dn!r}")
     if render_threshold_dn == 0 and depth_range_m is None:
         raise ConfigError("render_threshold_dn = 0 makes the rain volume infinite; give depth_range_m too")
+    if closeup_light is not None:
+        try:
+            light = tuple(float(v) for v in closeup_light)
+        except (TypeError, ValueError):
+            light = ()
+        if len(light) != 2 or not all(math.isfinite(v) for v in light):
+            raise ConfigError(f"closeup_light must be (theta, phi) in radians or None, got {closeup_light!r}")
+    if not (float(closeup_min_width_px) > 0 and float(closeup_max_blur_ratio) >= 0):
+        raise ConfigError(f"closeup_min_width_px must be > 0 and closeup_max_blur_ratio >= 0, got "
+                          f"{closeup_min_width_px!r}, {closeup_max_blur_ratio!r}")
     if jpeg_quality is not None and not (1 <= int(jpeg_quality) <= 100):
         raise ConfigError(f"jpeg_quality must be 1..100, got {jpeg_quality!r}")
     if rain_rate_mm_h is not None:
@@ -1404,7 +1814,8 @@ def simulate(profile, *, seconds=None, n_frames=None, rain_rate_mm_h=None, dsd=N
                       depth_range_m=depth_range_m, reference_depth_m=reference_depth_m,
                       truth_window_s=truth_window_s, jpeg_quality=jpeg_quality, noise=noise,
                       pixel_pitch_m=pitch, assumptions=assumptions, rain_description=desc,
-                      window_edges=window_edges)
+                      window_edges=window_edges, closeup=closeup, closeup_light=closeup_light,
+                      closeup_min_width_px=closeup_min_width_px, closeup_max_blur_ratio=closeup_max_blur_ratio)
 
 
 def render_clip(profile, *, seconds=None, n_frames=None, rain_rate_mm_h=None, seed=0,
@@ -1423,7 +1834,8 @@ def render_clip(profile, *, seconds=None, n_frames=None, rain_rate_mm_h=None, se
         Also put ``clean`` (T, M, N) uint8, ``rain_masks`` (T, M, N) bool and
         ``frames`` (list of per-frame dicts with ``drops``) into the truth dict.
     **kw
-        Any other :func:`simulate` parameter.
+        Any other :func:`simulate` parameter, e.g. ``closeup=True`` (off by
+        default, see :func:`simulate`) and ``closeup_light``.
 
     Returns
     -------

@@ -126,6 +126,9 @@ def rain_pixel_energies(b: np.ndarray, *, masks: np.ndarray, max_pixels: int | N
 class DynamicsField:
     """Correlation of the binary rain field on a grid of ``cell`` x ``cell`` pixel cells.
 
+    Each grid cell summarises the R_b of the surrounding ``smooth`` x ``smooth``
+    correlation cells of :class:`RainDynamics`.
+
     Attributes
     ----------
     energy : (GH, GW, K) float32
@@ -188,8 +191,8 @@ class RainDynamics:
     cell : int
         R_b is averaged over disjoint cell x cell pixels (3 in the paper).
     smooth : int
-        The cell statistics are further summed over smooth x smooth cells
-        before direction and segmentation [cells].
+        The cell statistics are further summed over about smooth x smooth
+        cells before direction and segmentation [cells] (see ``stride``).
     max_pixels : int
         Rain pixels evaluated per frame, at most [px].
     min_ratio : float
@@ -204,6 +207,10 @@ class RainDynamics:
         Rain cells must lie within this angle of the frame's dominant rain
         direction [deg]; ``None`` turns the test off (rain whose direction
         varies across the frame).
+    stride : int, optional
+        The field is evaluated every ``stride`` cells, each value summing
+        3 stride x 3 stride cells (default round(smooth / 3)): its needles and
+        regions are ``cell * stride`` pixels apart.
     min_frame_fraction : float
         Rain is stationary in time (Sec. 4.1): a rain region must have seen
         rain pixels in at least this fraction of the window's frames (and in
@@ -211,9 +218,9 @@ class RainDynamics:
     """
 
     def __init__(self, shape: tuple[int, int], *, l: int = 11, f: int = 30, cell: int = 3, smooth: int = 7,
-                 max_pixels: int = 3000, min_ratio: float = 2.5, min_strength: float = 0.08,
+                 max_pixels: int = 2000, min_ratio: float = 2.5, min_strength: float = 0.08,
                  min_events: float = 20.0, max_angle_dev_deg: float | None = 30.0,
-                 min_frame_fraction: float = 1.0 / 6.0):
+                 min_frame_fraction: float = 1.0 / 6.0, stride: int | None = None):
         if f < 1:
             raise ValueError(f"window f must be at least one frame, got {f!r}")
         if cell < 1 or smooth < 1:
@@ -229,6 +236,7 @@ class RainDynamics:
         self.max_pixels = max_pixels
         self.min_ratio, self.min_strength, self.min_events = float(min_ratio), float(min_strength), float(min_events)
         self.max_angle_dev_deg = max_angle_dev_deg
+        self.stride = max(1, int(round(self.smooth / 3.0))) if stride is None else max(1, int(stride))
         self.min_frame_fraction = float(min_frame_fraction)
         # Coarse blocks (smooth x smooth cells) counting the frames that saw rain.
         self.block = self.cell * self.smooth
@@ -287,12 +295,20 @@ class RainDynamics:
         import cv2
 
         frames = max(len(self._ring), 1)
-        acc = self._acc.reshape(self.gh, self.gw, self.K).astype(np.float32)
-        cnt = self._cnt.reshape(self.gh, self.gw).astype(np.float32)
-        k = (self.smooth, self.smooth)
-        sm = cv2.boxFilter(np.ascontiguousarray(acc), -1, k, normalize=False, borderType=cv2.BORDER_CONSTANT)
-        events = cv2.boxFilter(cnt, -1, k, normalize=False, borderType=cv2.BORDER_CONSTANT)
-        area = float(self.cell * self.cell * self.smooth * self.smooth * frames)
+        # Sum the cells in blocks of stride x stride, then over 3 x 3 blocks: a
+        # box of about smooth x smooth cells evaluated every `stride` cells.
+        st = self.stride
+        bh, bw = self.gh // st, self.gw // st
+        acc = self._acc.reshape(self.gh, self.gw, self.K)[:bh * st, :bw * st]
+        cnt = self._cnt.reshape(self.gh, self.gw)[:bh * st, :bw * st]
+        blk = acc.reshape(bh, st, bw, st, self.K).sum(axis=(1, 3)).astype(np.float32)
+        blkn = cnt.reshape(bh, st, bw, st).sum(axis=(1, 3)).astype(np.float32)
+        sm = cv2.boxFilter(blk, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+        events = np.maximum(cv2.boxFilter(blkn, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT), 0.0)
+        cy = np.arange(bh) * st + st // 2
+        cx = np.arange(bw) * st + st // 2
+        box = 3 * st
+        area = float(self.cell * self.cell * box * box * frames)
         # Remove what an uncorrelated field of the same density would give,
         # rho^2 (|mask| - 1): in dense rain, streaks crossing the perpendicular
         # mask would otherwise hide the directionality.
@@ -309,8 +325,9 @@ class RainDynamics:
         rain = (emax >= self.min_strength) & (ratio >= self.min_ratio) & (events >= self.min_events)
         need = max(2, math.ceil(self.min_frame_fraction * len(self._ring)))
         seen = cv2.dilate(self._frames_seen.reshape(self.bh, self.bw).astype(np.float32), np.ones((3, 3), np.uint8))
-        seen_cells = np.repeat(np.repeat(seen, self.smooth, axis=0), self.smooth, axis=1)[:self.gh, :self.gw]
-        rain &= seen_cells >= need
+        by = np.minimum((cy * self.cell) // self.block, self.bh - 1)
+        bx = np.minimum((cx * self.cell) // self.block, self.bw - 1)
+        rain &= seen[by[:, None], bx[None, :]] >= need
         if self.max_angle_dev_deg is not None and np.any(rain):
             # Within a frame rain falls in one direction (Sec. 4.1); cells that
             # disagree with the dominant direction are scene motion.
@@ -320,7 +337,8 @@ class RainDynamics:
             dev = np.abs((direction - math.degrees(dom) + 90.0) % 180.0 - 90.0)
             rain &= dev <= self.max_angle_dev_deg
         return DynamicsField(energy=energy, strength=emax, ratio=ratio, direction_deg=direction,
-                             events=events, rain=rain, cell=self.cell, frames=len(self._ring), shape=self.shape)
+                             events=events, rain=rain, cell=self.cell * st, frames=len(self._ring),
+                             shape=self.shape)
 
 
 def dominant_direction_deg(field: DynamicsField) -> float:

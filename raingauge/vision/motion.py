@@ -81,7 +81,8 @@ def _phase_translation(ref_small: np.ndarray, mov_small: np.ndarray, window: np.
     (dx, dy), response = cv2.phaseCorrelate(ref_small.copy(), mov_small.copy(), window)
     if not (math.isfinite(dx) and math.isfinite(dy)) or response < min_response:
         return 0.0, 0.0, float(response)
-    if refine:
+    if refine and max(abs(dx), abs(dy)) >= 0.5 * WARP_MIN_SHIFT_PX:
+        # (a static camera needs no refinement: its frames are not warped)
         W = np.array([[1, 0, dx], [0, 1, dy]], dtype=np.float32)
         try:
             _, W = cv2.findTransformECC(ref_small, mov_small, W, cv2.MOTION_TRANSLATION,

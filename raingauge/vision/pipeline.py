@@ -137,7 +137,10 @@ class Derainer:
         estimated from the video.
     c : float, optional
         Eq. (19) threshold [gray levels]; default the profile's
-        ``detection_threshold_dn`` (3).
+        ``detection_threshold_dn`` (3).  Without a profile the default is
+        max(3, 2 sigma) with sigma the noise estimated from the first frames:
+        c is "the minimum change due to a drop that is detectable in the
+        presence of noise" (Sec. 5.1), and 3 gray levels assumes a quiet camera.
     l, f : int
         Correlation neighbourhood [px] and window [frames] (11 and 30).
     motion : str
@@ -152,6 +155,11 @@ class Derainer:
         Also clean the faint rim of detected streaks (see :func:`remove_rain`).
     runs : bool
         Remove drops that hit a pixel in 2 or 3 consecutive frames.
+    tol : float, "auto" or None
+        Largest |I_{n-1} - I_{n+1}| of a candidate [gray levels]: Eq. (19)
+        asks the two neighbours to be equal (a stationary background).
+        "auto" allows three standard deviations of the noise of their
+        difference, 3 sqrt(2) sigma; None does not test it.
     repeat_tol : float
         Frames whose mean absolute luminance difference to the previous one is
         below this are repeats [gray levels].
@@ -171,9 +179,10 @@ class Derainer:
     def __init__(self, profile=None, *, c: float | None = None, l: int = 11, f: int = 30,
                  motion: str = "translation", beta_max: float | None = None,
                  noise_sigma: float | str | None = None, min_pixels: int = 5, grow_px: int = 1,
-                 runs: bool = True, repeat_tol: float = 0.1, tol: float | None = None,
+                 runs: bool = True, repeat_tol: float = 0.1, tol: float | str | None = "auto",
                  dynamics: dict | None = None, segment_every: int = 4, warmup: int | None = None):
         self.profile = profile
+        self._c_auto = c is None and profile is None
         if c is None:
             c = profile.detection_threshold_dn if profile is not None else 3.0
         if not (math.isfinite(c) and c > 0):
@@ -191,7 +200,8 @@ class Derainer:
         self.grow_px = int(grow_px)
         self.runs = bool(runs)
         self.repeat_tol = float(repeat_tol)
-        self.tol = tol
+        self._tol_auto = tol == "auto"
+        self.tol = None if self._tol_auto else tol
         self._dyn_kw = dict(dynamics or {})
         self._tracker = MotionTracker(model=motion)
         self._dyn: RainDynamics | None = None
@@ -259,6 +269,8 @@ class Derainer:
         if k == 2:
             if self._noise_auto:
                 self.noise_sigma = estimate_noise_sigma(self._units[0].lum, self._units[1].lum, self._units[2].lum)
+            if self._c_auto:
+                self.c = max(self.c, 2.0 * self.noise_sigma)
             self._detect(0, 1, 2, boundary=True)   # first frame: both neighbours from the future
         if k >= 2:
             self._detect(k - 1, k - 2, k)
@@ -303,8 +315,11 @@ class Derainer:
         rise = prev <= thr
         fall = nxt <= thr
         cand = rise & fall                      # Eq. (19)
-        if self.tol is not None:
-            cand &= np.abs(prev - nxt) <= self.tol
+        tol = self.tol
+        if self._tol_auto:
+            tol = 3.0 * math.sqrt(2.0) * self.noise_sigma
+        if tol is not None:
+            cand &= np.abs(prev - nxt) <= tol
         if valid is not None:
             cand &= valid
         b, streaks = photometric_filter(prev, cur, nxt, cand, beta_max=self.beta_max, noise_sigma=self.noise_sigma,
@@ -334,7 +349,8 @@ class Derainer:
         if top >= 2 and np.any(region):
             ids = [self._reflect(n + o, top) for o in range(-3, 4)]
             window = _StreamWindow(self, n, ids)
-            idx, vals = remove_window(window, u.b, region, c=self.c, runs=self.runs, tol=self.tol,
+            tol = 3.0 * math.sqrt(2.0) * self.noise_sigma if self._tol_auto else self.tol
+            idx, vals = remove_window(window, u.b, region, c=self.c, runs=self.runs, tol=tol,
                                       grow_px=self.grow_px, beta_max=self.beta_max,
                                       noise_sigma=self.noise_sigma, min_pixels=self.min_pixels)
             if idx.size:
