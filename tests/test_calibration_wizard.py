@@ -136,6 +136,23 @@ def _answer(child, prompt: str, answer: str):
     child.sendline(answer)
 
 
+def _exit_status(child) -> int:
+    """Wait for the wizard to end; its exit status."""
+    child.expect(__import__("pexpect").EOF)
+    child.close()
+    return child.exitstatus
+
+
+def _skip_the_rest_and_write(child, name: str) -> int:
+    """Skip the noise, focus and dry-run steps, keep the profile name, confirm writing; the exit status."""
+    _answer(child, "Still scene", "")
+    _answer(child, "Plan the focus distance and aperture? [Y/n]:", "n")
+    _answer(child, "Dry run", "")
+    _answer(child, f"Profile name [{name}]:", "")
+    _answer(child, "? [Y/n]:", "")
+    return _exit_status(child)
+
+
 def test_interactive_wizard_end_to_end(captures, tmp_path):
     folder, truth = captures
     out = tmp_path / "field.toml"
@@ -170,9 +187,7 @@ def test_interactive_wizard_end_to_end(captures, tmp_path):
     _answer(child, "Profile name [field]:", "field-cam")
     _answer(child, f"Write {out}? [Y/n]:", "")
     child.expect_exact(f"wrote {out}")
-    child.expect(__import__("pexpect").EOF)
-    child.close()
-    assert child.exitstatus == 0
+    assert _exit_status(child) == 0
     prof = load_profile(out)
     assert prof.name == "field-cam"
     assert prof.focal_length_px == pytest.approx(f_seen, abs=0.01)
@@ -200,9 +215,7 @@ def test_interactive_session_resumes_after_interruption(captures, tmp_path):
     child.expect_exact("Exposure bracket folder")
     child.sendeof()  # the technician's laptop battery dies here
     child.expect_exact("the session is saved")
-    child.expect(__import__("pexpect").EOF)
-    child.close()
-    assert child.exitstatus == 1
+    assert _exit_status(child) == 1
     assert not out.exists()
     saved = json.loads(state.read_text())
     assert list(saved["results"]) == ["geometry"]
@@ -211,14 +224,7 @@ def test_interactive_session_resumes_after_interruption(captures, tmp_path):
     _answer(child, "(steps done: geometry)? [Y/n]:", "")
     _answer(child, "Redo it? [y/N]:", "")
     _answer(child, "Exposure bracket folder", "")
-    _answer(child, "Still scene", "")
-    _answer(child, "Plan the focus distance and aperture? [Y/n]:", "n")
-    _answer(child, "Dry run", "")
-    _answer(child, "Profile name [resumed]:", "")
-    _answer(child, "? [Y/n]:", "")
-    child.expect(__import__("pexpect").EOF)
-    child.close()
-    assert child.exitstatus == 0
+    assert _skip_the_rest_and_write(child, "resumed") == 0
     prof = load_profile(out)
     assert prof.focal_length_px == pytest.approx(saved["results"]["geometry"]["camera"]["focal_length_px"])
     assert prof.provenance["steps_done"] == ["geometry"]
@@ -242,14 +248,7 @@ def test_interactive_step_error_can_be_retried(captures, tmp_path):
     _answer(child, "Exposure bracket folder", str(folder / "bracket"))
     _answer(child, "Method, debevec or robertson [debevec]:", "")
     _answer(child, "Accept this result? [Y/n]:", "")
-    _answer(child, "Still scene", "")
-    _answer(child, "Plan the focus distance and aperture? [Y/n]:", "n")
-    _answer(child, "Dry run", "")
-    _answer(child, "Profile name [retry]:", "")
-    _answer(child, "? [Y/n]:", "")
-    child.expect(__import__("pexpect").EOF)
-    child.close()
-    assert child.exitstatus == 0
+    assert _skip_the_rest_and_write(child, "retry") == 0
     prof = load_profile(out)
     assert prof.provenance["steps_done"] == ["response"]
     assert not prof.is_linear

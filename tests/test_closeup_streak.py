@@ -245,8 +245,11 @@ def test_render_streak_cli_missing_output_folder(tmp_path, capsys):
     (["--npy", "{tmp}/missing/s.npy"], "does not exist"),
     (["--radius-mm", "abc"], "invalid float value: 'abc'"),
     (["--exposure-ms", "4", "--fall-speed", "3"], "not allowed with"),
+    (["--envmap", "{tmp}/garbage.png"], "cannot read the environment map"),
+    (["--envmap", "{tmp}"], "cannot read the environment map"),
 ])
 def test_render_streak_cli_refuses_before_rendering(tmp_path, cli_error, args, message):
+    (tmp_path / "garbage.png").write_bytes(b"\x89PNG\r\n\x1a\n truncated")
     cli_error(["render-streak", "--radius-mm", "1", "--length-px", "20", "--width-px", "6", "--supersample", "1",
                "--out", tmp_path / "s.png", *[a.format(tmp=tmp_path) for a in args]], message)
     assert not list(tmp_path.glob("s.*"))

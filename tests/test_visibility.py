@@ -86,12 +86,24 @@ def test_closed_form_g_matches_numerical_integral():
         g_closed = vis.visibility_g(a, **kw)
         worst = max(worst, abs(g_closed / g_num - 1))
         if vis.Z_NEAR_M < z0:
-            assert vis.visibility_g_cases(a, **kw) == pytest.approx(g_num, rel=0.01)
-    assert worst < 0.01
+            assert vis.visibility_g_cases(a, **kw) == pytest.approx(g_num, rel=1e-6)
+    # both are exact: they agree to the quadrature's tolerance, not merely to a per cent
+    assert worst < 1e-6
     # the vectorised closed form over radii equals the scalar one
     radii = np.array([0.3e-3, 0.8e-3, 2.0e-3])
     many = vis.visibility_g(radii, **geo())
     assert many == pytest.approx([vis.visibility_g(r, **geo()) for r in radii], rel=1e-12)
+
+
+@pytest.mark.parametrize("z_near", [0.0, 0.1, 1.0])
+def test_closed_form_g_covers_focus_nearer_than_the_first_layer(z_near):
+    # case 4 (z0 < z1, not in the paper) and z1 = 0 (every drop down to the lens)
+    for f, z0, a in [(8000.0, 0.06, 0.5e-3), (3155.0, 0.5, 0.25e-3), (3155.0, 0.05, 1.5e-3)]:
+        kw = dict(geo(f, 2.0, z0), z_near_m=z_near)
+        g_num = vis.visibility_g(a, method="numerical", **kw)
+        assert g_num > 0
+        # (the quadrature starts at 1 um where z1 = 0: a few 1e-6 of G below the closed form)
+        assert vis.visibility_g(a, **kw) == pytest.approx(g_num, rel=1e-5)
 
 
 def test_paper_cases_are_each_exercised():

@@ -69,6 +69,10 @@ __all__ = ["RainGauge", "RECORD_KEYS", "QUALITY_FLAGS"]
 #: sky seen through the drop, Sec. 4.2.3), only for the ``low_contrast`` flag.
 NOMINAL_DROP_BRIGHTNESS_DN = 200.0
 
+#: Law-abiding streaks needed before the drop brightness E_r is trusted; frames are
+#: kept back (at most until the next record) until then.
+MATURE_BRIGHTNESS_SAMPLES = 30
+
 #: The record contract (the keys every record carries, in order).
 RECORD_KEYS: tuple[str, ...] = (
     "t_start_s", "t_end_s", "rain_rate_mm_h", "rain_rate_ci95_mm_h", "accumulation_mm",
@@ -174,6 +178,7 @@ class RainGauge:
         self.rejections: Counter = Counter()
         self._dilated = None
         self._slopes: deque = deque(maxlen=50)          # streak direction dx/dy of counted drops
+        self._pending: list = []                        # frames awaiting the E_r estimate
         self._rng = np.random.default_rng(12345)
         self._empty_scale = self._typical_drop_rate()
 
@@ -221,6 +226,7 @@ class RainGauge:
     def flush(self) -> list[dict]:
         """End of stream: the pending records; one partial record if none was emitted yet."""
         out: list[dict] = []
+        self._resolve_pending()
         if not self._frames:
             return out
         t_end = self._frames[-1][0] + self._frame_interval
@@ -249,7 +255,8 @@ class RainGauge:
         weight = 1.0 / (area * kap)
         return 3.6e6 * math.pi / 6 * (2 * a) ** 3 * v * weight / self.window_s
 
-    def _frame_flags(self, raw: np.ndarray, cur: np.ndarray, spike: np.ndarray, gap: bool) -> set:
+    def _frame_flags(self, raw: np.ndarray, cur: np.ndarray, spike: np.ndarray, gap: bool,
+                     bright_fraction: float = 0.0) -> set:
         import cv2
 
         flags = set()
@@ -264,10 +271,11 @@ class RainGauge:
             flags.add("overexposed")
         if float(np.mean(sub)) < 12.0:
             flags.add("underexposed")
-        # rain only brightens: one-frame darkenings of the same size come from motion
+        # rain only brightens: one-frame darkenings as common as the brightenings come from
+        # motion (rain makes a darkening only where streaks of both neighbours overlap)
         dark = cv2.blur(spike, (1, self.smooth_px)) if self.smooth_px > 1 else spike
         frac_dark = float(np.mean(dark[::2, ::2] <= -self.c))
-        if frac_dark > 0.004:
+        if frac_dark > 0.004 and frac_dark > 0.3 * bright_fraction:
             flags.add("scene_motion")
         lap = cv2.Laplacian(cv2.GaussianBlur(cur[::2, ::2], (3, 3), 0), cv2.CV_32F)
         sharp = float(np.mean(np.abs(lap)))
@@ -289,7 +297,9 @@ class RainGauge:
         d1 = cv2.subtract(cur, prev)
         d2 = cv2.subtract(cur, nxt)
         dark_spike = cv2.max(d1, d2)
-        flags = self._frame_flags(raw, cur, dark_spike, gap)
+        bright = cv2.blur(spike, (1, self.smooth_px)) if self.smooth_px > 1 else spike
+        flags = self._frame_flags(raw, cur, dark_spike, gap,
+                                  bright_fraction=float(np.mean(bright[::2, ::2] >= self.c)))
         slope = float(np.median(self._slopes)) if len(self._slopes) >= 5 else 0.0
         labels, stats = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope)
         rejected = 0
@@ -308,14 +318,34 @@ class RainGauge:
                     change = change * (np.float32(c_ref) / denom)
                 else:
                     ref_bg = None
-            counted, rejected = self._measure(labels, stats, change, prev, cur, t, ref_bg=ref_bg)
-        for d in counted:
-            self._window_drops.append(d)
-            self._accum_mm += d["accum_mm"]
-            if self.keep_drops:
-                self.drops.append(d)
-        self._frames.append((t, flags, rejected))
+            prepared, rejected = self._measure(labels, stats, change, prev, cur, t, ref_bg=ref_bg)
+        else:
+            prepared = []
+        entry = [t, flags, rejected]
+        self._frames.append(entry)
+        self._pending.append((entry, prepared))
         self._last_t = t
+        if self.defocus_model != "uniform" or len(self._brightness) >= MATURE_BRIGHTNESS_SAMPLES:
+            self._resolve_pending()
+
+    def _resolve_pending(self) -> None:
+        """Decide the frames kept back until the drop brightness E_r was known well enough."""
+        if not self._pending:
+            return
+        if self.defocus_model == "uniform" and len(self._brightness) >= 10:
+            # the drop brightness E_r: the sharpest of the law-abiding streaks (defocus only dims)
+            e_r = float(np.percentile(np.asarray(self._brightness), 90))
+        else:
+            e_r = float("nan")
+        for entry, prepared in self._pending:
+            counted, rejected = self._decide(prepared, e_r)
+            entry[2] += rejected
+            for d in counted:
+                self._window_drops.append(d)
+                self._accum_mm += d["accum_mm"]
+                if self.keep_drops:
+                    self.drops.append(d)
+        self._pending.clear()
 
     def _screen(self, stats) -> np.ndarray:
         """Labels worth measuring: whole, long enough, roughly on the velocity law."""
@@ -341,11 +371,7 @@ class RainGauge:
         from raingauge.physics.streaks import beta_max
 
         bmax = beta_max(T)
-        counted = []
         rejected = 0
-        # forget drops too old to reappear
-        while self._recent and t - self._recent[0]["t"] > 4 * self._frame_interval + 1e-9:
-            self._recent.popleft()
         props = [StreakProps(int(lab), stats[lab, :4], change, labels, prof, noise_sigma=self.noise_change,
                              prev=prev, cur=cur, shape=self._shape) for lab in self._screen(stats)]
         fit_batch(props, shape=self._shape)
@@ -391,14 +417,29 @@ class RainGauge:
             if np.isfinite(ib) and w_app >= 2.5:
                 self._brightness.append(ib + focused_contrast)
             cands.append((sp, w_app, mot, dx, xc, yc, (ib, total)))
-        if self.defocus_model == "uniform" and cands and len(self._brightness) >= 10:
-            # the drop brightness E_r: the sharpest of the law-abiding streaks (defocus only dims)
-            e_r = float(np.percentile(np.asarray(self._brightness), 90))
-        else:
-            e_r = float("nan")
+        prepared = []
         for sp, w_app, mot, dx, xc, yc, photo in cands:
-            if photo is not None:
-                ib, total = photo
+            p_over = self._overlap_probability(labels, sp) if self.overlap_correction else 0.0
+            prepared.append({"t": t, "w_app": w_app, "mot": mot, "dx": dx, "xc": xc, "yc": yc,
+                             "photo": photo, "p_overlap": p_over, "blur_px": sp.blur_px,
+                             "width_px": sp.width_px, "chi2": sp.cross_fit.get("chi2"),
+                             "slope": sp.axis[2]})
+        return prepared, rejected
+
+    def _decide(self, prepared: list, e_r: float) -> tuple[list, int]:
+        """Photometric focus, sizes, de-duplication and weights of one frame's candidates."""
+        prof = self.profile
+        f = prof.focal_length_px
+        z0 = prof.focus_distance_m
+        T = prof.exposure_s
+        counted = []
+        rejected = 0
+        for c in prepared:
+            t, w_app, mot, dx, xc, yc = c["t"], c["w_app"], c["mot"], c["dx"], c["xc"], c["yc"]
+            while self._recent and t - self._recent[0]["t"] > 4 * self._frame_interval + 1e-9:
+                self._recent.popleft()
+            if c["photo"] is not None:
+                ib, total = c["photo"]
                 q = float(photometric_focus(total, w_app, e_r - ib)) if np.isfinite(e_r) else 1.0
                 if not q >= self.volume.q_min:
                     rejected += 1
@@ -433,17 +474,16 @@ class RainGauge:
                 continue
             # a drop whose streak touched another one is lost to the merge: count the
             # isolated ones up by the chance of isolation at this streak's size and frame
-            if self.overlap_correction:
-                area *= 1.0 - self._overlap_probability(labels, sp)
+            area *= 1.0 - c["p_overlap"]
             z = float(self.volume.depth_m(a))
             v = mot * z / (f * T)
             weight = 1.0 / (kap * area)
             d = {"t": t, "x": xc, "y": yc, "ux": dx / T, "uy": mot / T, "w": w_app, "diameter_m": 2 * a,
-                 "velocity_m_s": v, "weight_s_m3": weight, "blur_px": sp.blur_px, "width_px": sp.width_px,
-                 "apparent_width_px": w_app, "motion_px": mot,
+                 "velocity_m_s": v, "weight_s_m3": weight, "blur_px": c["blur_px"], "width_px": c["width_px"],
+                 "apparent_width_px": w_app, "motion_px": mot, "chi2": c["chi2"],
                  "accum_mm": 1e3 * math.pi / 6 * (2 * a) ** 3 * v * weight}
             self._recent.append(d)
-            self._slopes.append(sp.axis[2])
+            self._slopes.append(c["slope"])
             counted.append(d)
         return counted, rejected
 
@@ -476,6 +516,8 @@ class RainGauge:
     # ----------------------------------------------------------------- records
     def _emit_until(self, t_now: float) -> list[dict]:
         out = []
+        if t_now >= self._next_boundary - 1e-9:
+            self._resolve_pending()
         while t_now >= self._next_boundary - 1e-9:
             b = self._next_boundary
             if b - self.clock_start_s >= self.window_s - 1e-9:

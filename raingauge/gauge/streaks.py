@@ -331,7 +331,9 @@ def fit_cross_profile(xi, values, *, sigma_min: float = SHARP_SIGMA_PX, weights=
     dict
         ``amplitude, centre, width, sigma`` and the standard errors
         ``width_err, sigma_err``; ``width_apparent``, the width of a sharp
-        profile of the same shape and variance (blur included); ``ok``.
+        profile of the same shape and variance (blur included); ``chi2``, the
+        reduced chi-square of the fit (about 1 for one streak in noise of the
+        given weights; two streaks side by side fit badly); ``ok``.
     """
     w = None if weights is None else np.asarray(weights, dtype=float)
     return fit_cross_profiles([(np.asarray(xi, dtype=float), np.asarray(values, dtype=float), w)],
@@ -340,7 +342,7 @@ def fit_cross_profile(xi, values, *, sigma_min: float = SHARP_SIGMA_PX, weights=
 
 _BAD_CROSS = {"amplitude": 0.0, "centre": 0.0, "width": float("nan"), "sigma": float("nan"),
               "width_err": float("inf"), "sigma_err": float("inf"), "width_apparent": float("nan"),
-              "ok": False}
+              "chi2": float("inf"), "ok": False}
 
 
 def _pad(arrays, fill=0.0):
@@ -409,6 +411,7 @@ def fit_cross_profiles(data, *, sigma_min: float = SHARP_SIGMA_PX, shape: str = 
                 return np.stack([_chord_gauss_batch(xi[i], P[j:j + 1])[0] for j, i in enumerate(idx)])
         p, jac, r = _lm_batch(model, p0, lo, hi, y, wts)
         dof = np.array([row[1].size for row in rows]) - 4
+        chi2 = np.einsum("bk,bk->b", r, r) / np.maximum(dof, 1)
         try:
             cov = _param_errors(jac, r, dof)
             errs = np.sqrt(np.clip(np.einsum("bnn->bn", cov), 0.0, None))
@@ -419,7 +422,7 @@ def fit_cross_profiles(data, *, sigma_min: float = SHARP_SIGMA_PX, shape: str = 
             w_app = math.sqrt(var_k * max(w * w / var_k + sg * sg - sigma_min ** 2, 0.0))
             out[i] = {"amplitude": amp, "centre": cen, "width": w, "sigma": sg,
                       "width_err": float(errs[j, 2]), "sigma_err": float(errs[j, 3]),
-                      "width_apparent": w_app, "ok": True}
+                      "width_apparent": w_app, "chi2": float(chi2[j]), "ok": True}
     return out
 
 

@@ -471,7 +471,7 @@ CLOSEUP_LIGHT_TO_SKY = 100.0
 #: close-up streaks are traced at most this wide and then scaled to the drop's width [px]
 _CLOSEUP_MAX_RENDER_WIDTH_PX = 12
 #: ... and with at most this many pixels of width x length (longer streaks are traced smaller)
-_CLOSEUP_MAX_RENDER_AREA_PX = 12 * 360
+_CLOSEUP_MAX_RENDER_AREA_PX = 8 * 300
 #: quantisation of the close-up streaks (so that the streak cache hits)
 _CLOSEUP_RADIUS_STEP = 0.04          # relative step of the radius grid (log) [-]
 _CLOSEUP_FALL_STEP_PX = 2.0          # fall length at the traced scale [px]
@@ -479,7 +479,8 @@ _CLOSEUP_VIEW_STEP_RAD = 0.1         # elevation of the line of sight [rad]
 _CLOSEUP_PHASES = 8                  # phase of the (2, 0) mode at the start of the exposure
 _CLOSEUP_REL_PHASES = 4              # phase of the (2, 1) mode relative to the (2, 0) mode
 _CLOSEUP_AZIMUTHS = 4                # azimuth of the (2, 1) mode over [0, pi)
-#: oscillation amplitudes drawn per drop (peak fractional radius change) [-]
+#: oscillation amplitudes drawn per drop (peak fractional radius change; a few per cent in rain,
+#: [TokayBeard1996]) [-]
 CLOSEUP_AMPLITUDES_AXISYMMETRIC = (0.03, 0.06, 0.09)
 CLOSEUP_AMPLITUDES_TRANSVERSE = (0.0, 0.03, 0.06)
 
@@ -1718,9 +1719,11 @@ def simulate(profile, *, seconds=None, n_frames=None, rain_rate_mm_h=None, dsd=N
         oscillating drops (Sec. 9, :func:`render_closeup_drops`) instead of
         uniform capsules; each deposits the same exposure as its capsule.
         Off by default: tracing costs about 0.2 s of CPU per drawn close-up
-        streak (cached for repeated quantised sizes), so with the
-        gauge-default profile at 10 mm/h (~0.75 such drops per frame) the
-        frame rate falls from ~45 to a few frames/s (benchmarks/bench_simulator.py).
+        streak (cached for repeated quantised sizes and phases, but most
+        close-up drops are new), so with the gauge-default profile at 10 mm/h
+        (about one such drop per frame) the frame rate falls from ~48 to ~5
+        frames/s of CPU, far more than the 10 % the default may cost
+        (``benchmarks/bench_simulator.py``).
         Each frame's truth then has ``closeup`` (ids of the drops so drawn,
         their oscillation amplitudes, the fall per oscillation period
         ``period_px``, ...) and the truth's ``rendering`` the rule used.

@@ -243,8 +243,10 @@ class RainDynamics:
         self.bh = -(-self.shape[0] // self.block)
         self.bw = -(-self.shape[1] // self.block)
         self._frames_seen = np.zeros(self.bh * self.bw, np.int32)
-        self.gh = -(-self.shape[0] // self.cell)
-        self.gw = -(-self.shape[1] // self.cell)
+        # the cell grid, padded to whole blocks of stride x stride cells
+        st = self.stride
+        self.gh = -(-(-(-self.shape[0] // self.cell)) // st) * st
+        self.gw = -(-(-(-self.shape[1] // self.cell)) // st) * st
         self._acc = np.zeros((self.gh * self.gw, self.K), np.float64)
         self._cnt = np.zeros(self.gh * self.gw, np.float64)
         self._ring: deque = deque()
@@ -299,8 +301,8 @@ class RainDynamics:
         # box of about smooth x smooth cells evaluated every `stride` cells.
         st = self.stride
         bh, bw = self.gh // st, self.gw // st
-        acc = self._acc.reshape(self.gh, self.gw, self.K)[:bh * st, :bw * st]
-        cnt = self._cnt.reshape(self.gh, self.gw)[:bh * st, :bw * st]
+        acc = self._acc.reshape(self.gh, self.gw, self.K)
+        cnt = self._cnt.reshape(self.gh, self.gw)
         blk = acc.reshape(bh, st, bw, st, self.K).sum(axis=(1, 3)).astype(np.float32)
         blkn = cnt.reshape(bh, st, bw, st).sum(axis=(1, 3)).astype(np.float32)
         sm = cv2.boxFilter(blk, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)

@@ -167,7 +167,7 @@ def transform_magnitude_px(M: np.ndarray, shape: tuple[int, int]) -> float:
     return float(np.max(np.hypot(*(moved - corners[:2]))))
 
 
-def warp_to(frame: np.ndarray, M: np.ndarray, *, min_shift_px: float = None,
+def warp_to(frame: np.ndarray, M: np.ndarray, *, min_shift_px: float | None = None,
             with_valid: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
     """Warp ``frame`` into the reference frame: ``aligned(x) = frame(M x)``.
 

@@ -168,6 +168,9 @@ class Derainer:
     segment_every : int
         Recompute the direction field and segmentation every this many frames
         (it integrates f frames, so it changes slowly).
+    registration_px : float
+        Registration error allowed for warped neighbours [px]: when the camera
+        moves, c is raised by this times the local gradient magnitude.
     warmup : int, optional
         Distinct frames gathered before the first output, so that the first
         frames are segmented with a correlation built over several frames
@@ -180,7 +183,8 @@ class Derainer:
                  motion: str = "translation", beta_max: float | None = None,
                  noise_sigma: float | str | None = None, min_pixels: int = 5, grow_px: int = 1,
                  runs: bool = True, repeat_tol: float = 0.1, tol: float | str | None = "auto",
-                 dynamics: dict | None = None, segment_every: int = 4, warmup: int | None = None):
+                 dynamics: dict | None = None, segment_every: int = 4, warmup: int | None = None,
+                 registration_px: float = 0.15):
         self.profile = profile
         self._c_auto = c is None and profile is None
         if c is None:
@@ -213,6 +217,7 @@ class Derainer:
         self._field: DynamicsField | None = None
         self._since_field = 0
         self.segment_every = int(segment_every)
+        self.registration_px = float(registration_px)
         self.warmup = self.f // 2 if warmup is None else int(warmup)
         self.streak_log: list[tuple[int, int]] = []   # (frame index, accepted streaks)
 
@@ -312,6 +317,15 @@ class Derainer:
         u = self._units[n]
         cur = u.lum
         thr = cur - np.float32(self.c)
+        if valid is not None and self.registration_px > 0:
+            # Warped neighbours carry a registration error of a fraction of a
+            # pixel, i.e. an intensity error proportional to the local gradient:
+            # thin bright lines would otherwise look like one-frame spikes.
+            import cv2
+
+            gx = cv2.Sobel(cur, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+            gy = cv2.Sobel(cur, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+            thr = thr - np.float32(self.registration_px) * cv2.magnitude(gx, gy)
         rise = prev <= thr
         fall = nxt <= thr
         cand = rise & fall                      # Eq. (19)
