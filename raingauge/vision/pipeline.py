@@ -120,7 +120,7 @@ class _Unique:
     lum: np.ndarray          # luminance, float32 (M, N)
     inputs: list             # input indices showing this frame
     b: np.ndarray | None = None
-    streaks: StreakFits | None = None
+    n_streaks: int = 0       # accepted streaks (the label image is not kept)
     rise: np.ndarray | None = None   # I_n - I_{n-1} >= c (own coordinates)
     fall: np.ndarray | None = None   # I_n - I_{n+1} >= c
     warped: bool = False
@@ -332,8 +332,10 @@ class Derainer:
         tol = self.tol
         if self._tol_auto:
             tol = 3.0 * math.sqrt(2.0) * self.noise_sigma
-        if tol is not None:
-            cand &= np.abs(prev - nxt) <= tol
+        if tol is not None:                     # ... with I_{n-1} = I_{n+1}
+            ci = np.flatnonzero(cand.ravel())
+            bad = np.abs(prev.ravel()[ci] - nxt.ravel()[ci]) > tol
+            cand.ravel()[ci[bad]] = False
         if valid is not None:
             cand &= valid
         b, streaks = photometric_filter(prev, cur, nxt, cand, beta_max=self.beta_max, noise_sigma=self.noise_sigma,
@@ -342,7 +344,7 @@ class Derainer:
             u.rise, u.fall = rise, fall
         u.warped = v1 is not None or v2 is not None
         u.b = b
-        u.streaks = streaks
+        u.n_streaks = int(np.count_nonzero(streaks.accepted))
         if not boundary:
             self._dyn.update(b)
 
@@ -371,7 +373,7 @@ class Derainer:
                 n_pix = replaced.size
                 out_frame.reshape(n_pix, -1)[idx] = self._to_uint8(vals).reshape(idx.size, -1)
                 replaced.ravel()[idx] = True
-        self.streak_log.append((u.inputs[0], int(u.streaks.accepted.sum()) if u.streaks is not None else 0))
+        self.streak_log.append((u.inputs[0], u.n_streaks))
         results = [DerainedFrame(index=i, frame=out_frame, rain=replaced, detected=u.b, region=region,
                                  field=field, repeat=(r > 0)) for r, i in enumerate(u.inputs)]
         # drop what is no longer needed (frames n-3 and older)
