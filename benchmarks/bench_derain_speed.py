@@ -82,7 +82,7 @@ def bench(shape, T):
     res["motion estimate (phase corr. + ECC)"] = per_frame_ms(tr.add, lum)
     dyn = RainDynamics(shape)
     res["dynamics update (R_b)"] = per_frame_ms(lambda n: dyn.update(bs[n]), triples)
-    every = 4
+    every = Derainer(None).segment_every
     res[f"direction field + segmentation (/{every})"] = per_frame_ms(lambda _: dyn.field(), range(3)) / every
     region = dyn.field().region_mask(dilate_px=5)
     wins = [n for n in triples if 3 <= n < T - 3]

@@ -29,7 +29,6 @@ int min(d, chord) = |R| - |R intersect (R + d)| for a convex region R.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np

@@ -166,11 +166,13 @@ class DynamicsField:
         import cv2
 
         M, N = self.shape
-        up = np.repeat(np.repeat(self.rain.view(np.uint8), self.cell, axis=0), self.cell, axis=1)[:M, :N]
-        if up.shape != (M, N):
-            full = np.zeros((M, N), np.uint8)
-            full[:up.shape[0], :up.shape[1]] = up
-            up = full
+        gh, gw = self.rain.shape
+        up = cv2.resize(self.rain.view(np.uint8), (gw * self.cell, gh * self.cell),
+                        interpolation=cv2.INTER_NEAREST)
+        if up.shape[0] < M or up.shape[1] < N:
+            up = cv2.copyMakeBorder(up, 0, max(M - up.shape[0], 0), 0, max(N - up.shape[1], 0),
+                                    cv2.BORDER_REPLICATE)
+        up = up[:M, :N]
         if dilate_px > 0:
             k = 2 * int(dilate_px) + 1
             up = cv2.dilate(up, np.ones((k, k), np.uint8))

@@ -58,7 +58,7 @@ def run_prefilter(rises: list, falls: list) -> np.ndarray:
 
     Every run [a, e] needs a rise at a and a fall at e; these one-sided tests
     are by-products of Eq. (19) for each frame, so this costs a few boolean
-    operations.  A pixel without any such neighbour (3 x 3) is an
+    operations.  A pixel with fewer than two such neighbours (3 x 3) is an
     isolated noise coincidence, not part of a streak, and is dropped.
     """
     import cv2
@@ -70,7 +70,7 @@ def run_prefilter(rises: list, falls: list) -> np.ndarray:
         pre |= R[a] & F[e]
     u8 = pre.view(np.uint8)
     count = cv2.boxFilter(u8, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
-    return pre & (count >= 2)
+    return pre & (count >= 3)
 
 
 def find_runs(lum, *, c: float, where: np.ndarray | None = None, tol: float | None = None
