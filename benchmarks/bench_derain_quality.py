@@ -83,6 +83,23 @@ def streak_recall(det, change, c, min_px=5, cover=0.3):
     return hits / max(total, 1), total
 
 
+def streak_pixels(rain_mask, change, c):
+    """All pixels (changed by >= 1 DN) of the streaks whose largest change is at least c, (T, M, N) bool.
+
+    The other reading of "rain pixels: streaks whose change is at least c":
+    a streak counts when it reaches c, and then so does its faint rim.
+    """
+    out = np.zeros(rain_mask.shape, bool)
+    for t, (m, ch) in enumerate(zip(rain_mask, change)):
+        n, lab = cv2.connectedComponents(m.astype(np.uint8), connectivity=8)
+        peak = np.full(n, -np.inf)
+        np.maximum.at(peak, lab.ravel(), ch.ravel())
+        keep = peak >= c
+        keep[0] = False
+        out[t] = keep[lab]
+    return out
+
+
 def table(rows, head):
     widths = [max(len(str(r[i])) for r in rows + [head]) for i in range(len(head))]
     line = "  ".join(str(h).ljust(w) for h, w in zip(head, widths))
@@ -129,6 +146,7 @@ def simulated(args):
         print(f"\n-- {title}: c = {c:g} DN; pixels changed by >= c: {100 * (change[sl] >= c).mean():.2f} %, "
               f">= 1 DN (truth rain_mask): {100 * rain_mask[sl].mean():.2f} %; ours ran at "
               f"{T / t_ours:.1f} frames/s")
+        spx = streak_pixels(rain_mask[sl], change[sl], c)
         rows = []
         for name, det in (("ours: binary field b (Eq. 19 + 18)", ours_det), ("ours: pixels removed", ours_rm),
                           ("temporal median (changed >= c)", median_detection(frames, med, c)),
@@ -138,8 +156,14 @@ def simulated(args):
             rec_c = (d & (change[sl] >= c)).sum() / max((change[sl] >= c).sum(), 1)
             rec_2c = (d & (change[sl] >= 2 * c)).sum() / max((change[sl] >= 2 * c).sum(), 1)
             srec, n_streaks = streak_recall(d, change[sl], c)
-            rows.append([name, f"{prec:.3f}", f"{rec_c:.3f}", f"{rec_2c:.3f}", f"{srec:.3f} ({n_streaks})"])
-        table(rows, ["detector", "precision", "recall >=c", "recall >=2c", "streak recall (n)"])
+            rec_s = (d & spx).sum() / max(spx.sum(), 1)
+            rows.append([name, f"{prec:.3f}", f"{rec_c:.3f}", f"{rec_2c:.3f}", f"{rec_s:.3f}",
+                         f"{srec:.3f} ({n_streaks})"])
+        table(rows, ["detector", "precision", "recall >=c", "recall >=2c", "recall, all px of streaks >=c",
+                     "streak recall (n)"])
+        print("   recall >= c: pixels changed by at least c (what Eq. 19 can see); 'all px of streaks >= c': every "
+              "pixel (>= 1 DN) of the streaks that reach c, rims included; streak recall: streaks of >= 5 px "
+              "changed by >= c with >= 30 % of them found")
         print()
         rows = []
         for name, clip in (("rainy input", frames), ("ours", derained), ("temporal median", med),
@@ -163,8 +187,8 @@ def simulated(args):
         rows.append([motion, f"{100 * ours:.4f} %", f"{100 * medf:.3f} %", f"{100 * mogf:.3f} %",
                      "yes" if ours <= 0.0005 else "NO"])
     table(rows, ["scene motion", "ours", "temporal median", "MOG2", "ours <= 0.05 %"])
-    print("   (pan:20 is 2/3 px per frame: the simulator resamples the scene bilinearly, so every third "
-          "frame is sharper than its neighbours;\n    pan:30 is a whole pixel per frame)")
+    print("   (pan:20 is 2/3 px per frame, pan:30 a whole pixel: the simulator integrates the moving scene over "
+          "the exposure, every frame equally sharp)")
 
     print("\n== 1c. Rain with moving objects: PSNR on the moving-object regions (target: ours >= median + 3 dB)")
     prof = small_profile(320, 240, noise_sigma_dn=0.7, exposure_s=0.008)

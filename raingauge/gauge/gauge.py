@@ -93,6 +93,23 @@ QUALITY_FLAGS: dict[str, str] = {
 }
 
 
+_VOLUMES: dict = {}
+
+
+def _sample_volume(profile, velocity_model: str, defocus_model: str) -> SampleVolume:
+    """The sample volume of a profile (computed once per profile and options)."""
+    try:
+        key = (profile, velocity_model, defocus_model)
+        hash(key)
+    except TypeError:
+        return SampleVolume(profile, velocity_model=velocity_model, defocus_model=defocus_model)
+    if key not in _VOLUMES:
+        if len(_VOLUMES) > 16:
+            _VOLUMES.clear()
+        _VOLUMES[key] = SampleVolume(profile, velocity_model=velocity_model, defocus_model=defocus_model)
+    return _VOLUMES[key]
+
+
 class RainGauge:
     """A camera rain gauge on a stream of frames.
 
@@ -153,13 +170,13 @@ class RainGauge:
         self.smooth_px = int(smooth_px)
         self.min_drops = int(min_drops)
         self.noise_change = max(noise, 0.5) * math.sqrt(1.5)
+        self._motion_dn = max(30.0, 8.0 * noise)       # a change no raindrop makes [gray levels]
         if defocus_model not in DEFOCUS_MODELS:
             raise ValueError(f"unknown defocus model {defocus_model!r}; valid: {list(DEFOCUS_MODELS)}")
         self.defocus_model = defocus_model
         self.overlap_correction = bool(overlap_correction)
         self._shape = "uniform" if defocus_model == "uniform" else "chord"
-        self.volume = volume if volume is not None else SampleVolume(
-            profile, velocity_model=velocity_model, defocus_model=defocus_model)
+        self.volume = volume if volume is not None else _sample_volume(profile, velocity_model, defocus_model)
         self.keep_drops = keep_drops
         self.drops: list[dict] = []
         self._frame_interval = profile.frame_interval_s
@@ -264,8 +281,8 @@ class RainGauge:
         weight = 1.0 / (area * kap)
         return 3.6e6 * math.pi / 6 * (2 * a) ** 3 * v * weight / self.window_s
 
-    def _frame_flags(self, raw: np.ndarray, cur: np.ndarray, spike: np.ndarray, gap: bool,
-                     bright_fraction: float = 0.0) -> set:
+    def _frame_flags(self, raw: np.ndarray, cur: np.ndarray, neighbour_change: np.ndarray,
+                     gap: bool) -> set:
         import cv2
 
         flags = set()
@@ -280,11 +297,9 @@ class RainGauge:
             flags.add("overexposed")
         if float(np.mean(sub)) < 12.0:
             flags.add("underexposed")
-        # rain only brightens: one-frame darkenings as common as the brightenings come from
-        # motion (rain makes a darkening only where streaks of both neighbours overlap)
-        dark = cv2.blur(spike, (1, self.smooth_px)) if self.smooth_px > 1 else spike
-        frac_dark = float(np.mean(dark[::2, ::2] <= -self.c))
-        if frac_dark > 0.004 and frac_dark > 0.6 * bright_fraction:
+        # a drop changes a pixel by a fraction beta < 0.1 of its contrast: large changes between
+        # the neighbouring frames n-1 and n+1 over many pixels are scene or camera motion
+        if float(np.mean(np.abs(neighbour_change[::2, ::2]) >= self._motion_dn)) > 0.005:
             flags.add("scene_motion")
         lap = cv2.Laplacian(cv2.GaussianBlur(cur[::2, ::2], (3, 3), 0), cv2.CV_32F)
         sharp = float(np.mean(np.abs(lap)))
@@ -302,18 +317,12 @@ class RainGauge:
 
         prof = self.profile
         spike, change = change_images(prev, cur, nxt)
-        # darkening spikes (for the motion flag): -max(I_n - I_{n-1}, I_n - I_{n+1})
-        d1 = cv2.subtract(cur, prev)
-        d2 = cv2.subtract(cur, nxt)
-        dark_spike = cv2.max(d1, d2)
-        bright = cv2.blur(spike, (1, self.smooth_px)) if self.smooth_px > 1 else spike
-        flags = self._frame_flags(raw, cur, dark_spike, gap,
-                                  bright_fraction=float(np.mean(bright[::2, ::2] >= self.c)))
+        flags = self._frame_flags(raw, cur, cv2.subtract(nxt, prev), gap)
         slope = float(np.median(self._slopes)) if len(self._slopes) >= 5 else 0.0
         labels, stats = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope)
         rejected = 0
         counted = []
-        if stats.shape[0] > 1:
+        if np.any(stats[1:, 4] > 0):
             ref_bg = None
             if self.defocus_model == "uniform" and len(self._brightness) >= 10:
                 # Eq. (18): a streak changes a pixel by beta (E_r - I_b); dividing by the local
@@ -365,7 +374,7 @@ class RainGauge:
                 (y + h < M - EDGE_MARGIN_PX)
         width = np.maximum(area / np.maximum(h, 1), 0.5)
         motion = h - width - (self.smooth_px - 1)
-        ok = whole & (h >= 6) & (motion > 1)
+        ok = whole & (h >= 6) & (motion > 1) & (area > 0)
         a = width * prof.focus_distance_m / (2 * prof.focal_length_px)
         v = np.maximum(motion, 1e-3) * prof.focus_distance_m / (prof.focal_length_px * prof.exposure_s)
         r = velocity_log_ratio(a, v, model=self.velocity_model)
@@ -383,8 +392,9 @@ class RainGauge:
 
         bmax = beta_max(T)
         rejected = 0
+        valid = stats[:, 4] > 0
         props = [StreakProps(int(lab), stats[lab, :4], change, labels, prof, noise_sigma=self.noise_change,
-                             prev=prev, cur=cur, shape=self._shape) for lab in self._screen(stats)]
+                             prev=prev, cur=cur, shape=self._shape, valid=valid) for lab in self._screen(stats)]
         # widths of all, then lengths only of those a rough length keeps near the law
         fit_batch(props, shape=self._shape, along=False)
         near = []
@@ -520,7 +530,7 @@ class RainGauge:
         import cv2
 
         if self._dilated is None or self._dilated[0] is not labels:
-            mask = (labels > 0).astype(np.uint8)
+            mask = sp._valid[labels].astype(np.uint8) if sp._valid is not None else (labels > 0).astype(np.uint8)
             self._dilated = (labels, cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool))
         grown = self._dilated[1]
         x0, y0, img, own, other = sp._crop

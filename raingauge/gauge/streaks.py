@@ -664,10 +664,12 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
     Returns
     -------
     labels : (M, N) int32 array
-        0 for background, 1..n for streaks (merged pieces share a label).
+        0 for background, else the component's label (merged pieces share one).
     stats : (n + 1, 5) int array
-        x, y, width, height, area of each label (row 0 the background), as
-        ``cv2.connectedComponentsWithStats``.
+        x, y, width, height, area of each label, as
+        ``cv2.connectedComponentsWithStats``; the area is 0 for the background,
+        for components under ``min_pixels`` and for pieces merged into another
+        label (streaks are the labels with area > 0).
     """
     import cv2
 
@@ -682,14 +684,14 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
     mask = cv2.compare(s, float(c), cv2.CMP_GE)
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8, ltype=cv2.CV_32S)
     stats = stats[:, :5].copy()
-    keep = stats[:, 4] >= min_pixels
-    keep[0] = True
-    remap = np.zeros(n, dtype=np.int32)
-    remap[keep] = np.arange(int(keep.sum()), dtype=np.int32)
-    stats = stats[keep]
+    stats[0] = 0
+    # components below min_pixels keep their label but get area 0 (never measured);
+    # relabelling the whole frame would cost more than the rest of the detection
+    stats[stats[:, 4] < min_pixels, 4] = 0
+    big = np.nonzero(stats[:, 4] > 0)[0]
     # merge collinear pieces separated by a short vertical gap
-    if stats.shape[0] > 2 and merge_gap_px > 0:
-        parent = np.arange(stats.shape[0])
+    if big.size > 1 and merge_gap_px > 0:
+        parent = {int(i): int(i) for i in big}
 
         def find(i):
             while parent[i] != i:
@@ -697,41 +699,42 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
                 i = parent[i]
             return i
 
-        x, y, w, h = (stats[1:, k].astype(float) for k in range(4))
+        x, y, w, h = (stats[big, k].astype(float) for k in range(4))
         cx = x + w / 2
         order = np.argsort(cx)
-        idx = np.arange(1, stats.shape[0])[order]
+        idx = big[order]
         cxs = cx[order]
         narrow = (w <= np.maximum(0.5 * h, 8.0))[order]      # near-vertical pieces only
         for a_i in range(idx.size):
             if not narrow[a_i]:
                 continue
-            ia = idx[a_i]
+            ia = int(idx[a_i])
             xa, ya, wa, ha = stats[ia, :4]
             j = a_i + 1
             while j < idx.size and cxs[j] - cxs[a_i] <= max(wa, 3) + 2:
-                ib = idx[j]
+                ib = int(idx[j])
                 xb, yb, wb, hb = stats[ib, :4]
                 gap = max(yb - (ya + ha), ya - (yb + hb))
                 if narrow[j] and 0 <= gap <= merge_gap_px and abs(cxs[j] - cxs[a_i]) <= 0.5 * min(wa, wb) + 1.5 \
                         and 0.5 <= (wa + 1) / (wb + 1) <= 2.0:
                     parent[find(ib)] = find(ia)
                 j += 1
-        roots = np.array([find(i) for i in range(stats.shape[0])])
-        if np.any(roots != np.arange(stats.shape[0])):
-            uniq, new_ids = np.unique(roots, return_inverse=True)
-            merged = np.zeros((uniq.size, 5), dtype=stats.dtype)
-            for new, root in enumerate(uniq):
-                members = np.nonzero(roots == root)[0]
-                xs = stats[members, 0]
-                ys = stats[members, 1]
-                x1 = (stats[members, 0] + stats[members, 2]).max()
-                y1 = (stats[members, 1] + stats[members, 3]).max()
-                merged[new] = [xs.min(), ys.min(), x1 - xs.min(), y1 - ys.min(), stats[members, 4].sum()]
-            remap = np.where(keep, new_ids[remap], 0).astype(np.int32)
-            stats = merged
-            remap[0] = 0
-    labels = remap[labels]
+        groups: dict[int, list[int]] = {}
+        for i in parent:
+            groups.setdefault(find(i), []).append(i)
+        for root, members in groups.items():
+            if len(members) < 2:
+                continue
+            m = np.array(members)
+            x0, y0 = stats[m, 0].min(), stats[m, 1].min()
+            x1 = (stats[m, 0] + stats[m, 2]).max()
+            y1 = (stats[m, 1] + stats[m, 3]).max()
+            stats[root] = [x0, y0, x1 - x0, y1 - y0, stats[m, 4].sum()]
+            sub = labels[y0:y1, x0:x1]
+            sub[np.isin(sub, m)] = root
+            for i in members:
+                if i != root:
+                    stats[i, 4] = 0
     return labels, stats
 
 
@@ -759,11 +762,14 @@ class StreakProps:
         Frames n-1 and n, for the photometric test of Eq. (18).
     shape : str
         Cross-profile model, ``"uniform"`` or ``"chord"`` (:func:`fit_cross_profile`).
+    valid : (n + 1,) bool array, optional
+        Which labels are streaks (``stats[:, 4] > 0``); other labelled pixels
+        (specks, merged pieces) are not masked out of the measurement.
     """
 
     def __init__(self, label: int, bbox, change: np.ndarray, labels: np.ndarray, camera, *,
                  margin_px: int = 4, noise_sigma: float = 2.0, prev: np.ndarray | None = None,
-                 cur: np.ndarray | None = None, shape: str = "uniform"):
+                 cur: np.ndarray | None = None, shape: str = "uniform", valid: np.ndarray | None = None):
         self.label = int(label)
         self.bbox = tuple(int(v) for v in bbox)
         self._change = change
@@ -774,6 +780,7 @@ class StreakProps:
         self._prev = prev
         self._cur = cur
         self.shape = shape
+        self._valid = valid
 
     # -- geometry of the crop
     @cached_property
@@ -787,6 +794,8 @@ class StreakProps:
         lab = self._labels[y0:y1, x0:x1]
         own = lab == self.label
         other = (lab != 0) & ~own
+        if self._valid is not None:
+            other &= self._valid[lab]
         img = self._change[y0:y1, x0:x1].astype(np.float64)
         return x0, y0, img, own, other
 
@@ -1120,10 +1129,10 @@ def measure_streaks(change: np.ndarray, labels: np.ndarray, stats: np.ndarray, c
     noise_sigma : float
         Noise of ``change`` [gray levels].
     """
-    ids = range(1, stats.shape[0]) if select is None else select
+    ids = np.nonzero(stats[:, 4] > 0)[0] if select is None else select
     out = StreakSet()
     for i in ids:
         out.append(StreakProps(int(i), stats[i, :4], change, labels, camera, noise_sigma=noise_sigma,
-                               prev=prev, cur=cur, shape=shape))
+                               prev=prev, cur=cur, shape=shape, valid=stats[:, 4] > 0))
     fit_batch(out, shape=shape)
     return out

@@ -22,8 +22,11 @@ Scripted motion (``motion=``, a list of items, or one string of items joined by 
 ------------------------------------------------------------------------------------
 The hard rain-free cases of Fig. 1(d, e) [GargNayar2007]:
 
-``pan:SPEED[:DIR_DEG]``      the camera pans: the background translates at SPEED
-                             px/s in direction DIR (0 = right, 90 = down).
+``pan:SPEED[:DIR_DEG]``      the camera pans: the image moves at SPEED px/s; DIR (0 =
+                             right, 90 = down) is the direction the camera's view moves
+                             over the scene (the scene drifts the opposite way on screen).
+                             Every frame integrates the moving scene over the exposure
+                             (see :func:`pan_exposure`), so all frames are equally sharp.
 ``objects:COUNT[:SPEED]``    COUNT textured ellipses cross the scene at about SPEED px/s.
 ``ripples[:AMPLITUDE]``      water ripples (circular waves, relative amplitude) in
                              the lower third of the frame.
@@ -46,7 +49,8 @@ import numpy as np
 
 from raingauge.errors import ConfigError, InputError
 
-__all__ = ["Scene", "SKIMAGE_SCENES", "MOTION_KINDS", "parse_motion", "level_to_linear"]
+__all__ = ["Scene", "SKIMAGE_SCENES", "MOTION_KINDS", "parse_motion", "level_to_linear", "pan_exposure",
+           "PAN_PSF_SIGMA_PX"]
 
 #: scikit-image scenes available offline (names of ``skimage.data`` functions)
 SKIMAGE_SCENES = ("astronaut", "brick", "camera", "cat", "chelsea", "coffee", "coins", "grass",
@@ -125,6 +129,104 @@ def parse_motion(motion) -> list[tuple[str, list[float]]]:
             raise ConfigError(f"scene motion {item!r}: {kind} takes at most {limits[kind]} parameter(s)")
         out.append((kind, values))
     return out
+
+
+#: Gaussian point-spread function of the camera applied to a panning scene [px] (lens and pixel aperture)
+PAN_PSF_SIGMA_PX = 0.6
+
+
+def _symmetric_spectrum(img: np.ndarray, velocity: tuple[float, float]):
+    """Real FFT of ``img`` mirrored along the axes the pan moves on (periodic, no edge jump)."""
+    from scipy import fft as sfft
+
+    axes = tuple(ax for ax, v in ((0, velocity[1]), (1, velocity[0])) if v != 0.0)
+    ext = np.asarray(img, np.float32)
+    for ax in axes:
+        ext = np.concatenate([ext, np.flip(ext, axis=ax)], axis=ax)
+    if not axes:
+        return axes, ext
+    return axes, sfft.rfftn(ext, axes=axes, workers=1)
+
+
+def pan_exposure(img: np.ndarray, velocity_px_s: tuple[float, float], t_s: float, exposure_s: float, *,
+                 psf_sigma_px: float = PAN_PSF_SIGMA_PX, spectrum=None) -> np.ndarray:
+    """The frame a panning camera records: ``img`` moving at ``velocity`` integrated over the exposure.
+
+    ``frame(x) = (1 / T) int_0^T (g * img)(x + v (t + s)) ds``, with g a
+    Gaussian point-spread function of ``psf_sigma_px``, evaluated exactly in
+    the Fourier domain on the image mirrored about its edges (so the scene
+    continues by reflection, and a long pan goes on indefinitely).
+
+    Parameters
+    ----------
+    img : (M, N) float array
+        Scene [gray levels], one sample per pixel.
+    velocity_px_s : (vx, vy)
+        Image motion of the scene [px/s]; the frame at time t shows the scene
+        point x + v t at pixel x.
+    t_s : float
+        Start of the exposure [s].
+    exposure_s : float
+        Exposure time T [s]: the motion blur is a box of length |v| T.
+    psf_sigma_px : float
+        Optical point-spread function [px].
+    spectrum : optional
+        ``_symmetric_spectrum(img, velocity)`` computed beforehand.
+
+    Returns
+    -------
+    (M, N) float32 array
+
+    Notes
+    -----
+    Resampling a sub-pixel shift with a short kernel (bilinear, bicubic)
+    blurs each frame by an amount that depends on the fractional part of the
+    shift: at 2/3 px per frame every third frame is sharper than its
+    neighbours, and texture peaks then look like one-frame spikes (Eq. 19).
+    A real pan moves a continuous image past the sensor: every frame has the
+    same sharpness.  The Fourier shift keeps the magnitude spectrum of every
+    frame equal (a pure phase ramp), and the Gaussian PSF makes the scene
+    close to band-limited, so no ringing appears at sharp edges.
+    """
+    from scipy import fft as sfft
+
+    vx, vy = float(velocity_px_s[0]), float(velocity_px_s[1])
+    m, n = img.shape
+    if spectrum is None:
+        spectrum = _symmetric_spectrum(img, (vx, vy))
+    axes, spec = spectrum
+    if not axes:
+        return np.array(img, np.float32, copy=True)
+    # shift at the middle of the exposure, box blur of the exposure's length
+    mid = (vx * (t_s + 0.5 * exposure_s), vy * (t_s + 0.5 * exposure_s))
+    ext_shape = [m, n]
+    for ax in axes:
+        ext_shape[ax] *= 2
+    freqs = []
+    for ax in (0, 1):
+        if ax not in axes:
+            freqs.append(None)
+            continue
+        size = ext_shape[ax]
+        f = (sfft.rfftfreq(size) if ax == axes[-1] else sfft.fftfreq(size)).astype(np.float64)
+        freqs.append(f)
+    factor = None
+    for ax, d, v in ((0, mid[1], vy), (1, mid[0], vx)):
+        f = freqs[ax]
+        if f is None:
+            continue
+        shape = [1, 1]
+        shape[ax] = f.size
+        g = np.exp(-2.0 * (math.pi * psf_sigma_px * f) ** 2)
+        term = (np.exp(2j * math.pi * f * d) * g).reshape(shape)
+        factor = term if factor is None else factor * term
+    # motion blur along the pan direction (not separable for a diagonal pan)
+    fy = freqs[0].reshape(-1, 1) if freqs[0] is not None else 0.0
+    fx = freqs[1].reshape(1, -1) if freqs[1] is not None else 0.0
+    blur = np.sinc((fx * vx + fy * vy) * exposure_s)
+    out = sfft.irfftn(spec * (factor * blur).astype(np.complex64), s=[ext_shape[ax] for ax in axes],
+                      axes=axes, workers=1)
+    return np.ascontiguousarray(out[:m, :n], dtype=np.float32)
 
 
 class Scene:
@@ -284,6 +386,12 @@ class Scene:
             tex = cv2.resize(tex, (n, m), interpolation=cv2.INTER_CUBIC).astype(np.float32)
             self._base = np.clip(self._base + 15.0 * tex, 0, 255).astype(np.float32)
 
+    def _pan_spectrum(self):
+        """Spectrum of the static background's symmetric extension, computed once (see :func:`pan_exposure`)."""
+        if getattr(self, "_pan_spec", None) is None:
+            self._pan_spec = _symmetric_spectrum(self._base, self._pan)
+        return self._pan_spec
+
     def describe(self) -> dict:
         """The scene as written into the truth."""
         return {"background": self.spec, "motion": [f"{k}:{':'.join(f'{v:g}' for v in p)}".rstrip(":")
@@ -306,9 +414,8 @@ class Scene:
             return img
         m, n = self.shape
         if self._pan is not None:
-            dx, dy = self._pan[0] * t, self._pan[1] * t
-            mat = np.float32([[1, 0, -dx], [0, 1, -dy]])
-            img = cv2.warpAffine(img, mat, (n, m), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
+            img = pan_exposure(img, self._pan, t, float(self.profile.exposure_s),
+                               spectrum=None if self._video is not None else self._pan_spectrum())
         else:
             img = img.copy()
         if self._foliage is not None:

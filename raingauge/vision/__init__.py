@@ -4,7 +4,7 @@ Frame-stack algorithms, no I/O.  Frames are linearised float arrays in gray
 levels, (M, N) per frame and (T, M, N) per stack.
 """
 
-from raingauge.vision.candidates import candidates, luminance, spike_change
+from raingauge.vision.candidates import candidates, hysteresis_candidates, luminance, spike_change
 from raingauge.vision.photometric import (
     Streak, StreakFits, beta_max_for_exposure, fit_streaks, label_streaks, photometric_filter,
 )
@@ -18,7 +18,7 @@ from raingauge.vision.baselines import MOG2Detector, mog2_derain, temporal_media
 from raingauge.vision.pipeline import DerainedFrame, Derainer, derain_clip, detect_streaks, estimate_noise_sigma
 
 __all__ = [
-    "candidates", "luminance", "spike_change",
+    "candidates", "luminance", "spike_change", "hysteresis_candidates",
     "label_streaks", "photometric_filter", "fit_streaks", "Streak", "StreakFits", "beta_max_for_exposure",
     "ORIENTATIONS_DEG", "oriented_masks", "rain_pixel_energies", "RainDynamics", "DynamicsField",
     "needle_map", "dominant_direction_deg",

@@ -8,9 +8,11 @@ stands out from both by at least the detection threshold c.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-__all__ = ["candidates", "spike_change", "luminance"]
+__all__ = ["candidates", "spike_change", "luminance", "hysteresis_candidates"]
 
 def luminance(frame: np.ndarray) -> np.ndarray:
     """Luminance of a frame [gray levels], float32 (M, N).
@@ -96,3 +98,72 @@ def candidates(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, *, c: float =
     if valid is not None:
         mask &= valid
     return mask
+
+
+
+def hysteresis_candidates(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, *, c: float = 3.0, c_low: float,
+                          tol: float | None = None, valid: np.ndarray | None = None,
+                          slack: np.ndarray | None = None, min_high: int = 1) -> np.ndarray:
+    """Candidate rain pixels by hysteresis: Eq. (19) at c_low, kept where a streak reaches c.
+
+    The one-frame spike test of Eq. (19) [GargNayar2007] is applied with a
+    lower threshold ``c_low``; its 8-connected components are kept when they
+    hold at least ``min_high`` pixels that pass the test at ``c``.  A faint
+    streak (or the faint rim of a bright one), whose pixels straddle c in the
+    noise, is then found whole instead of as scattered fragments, while noise
+    alone passes the weaker test only at isolated pixels, which reach c
+    rarely.  The components still go through the photometric test of Eq. (18).
+    This is the hysteresis thresholding of edge detection [Canny1986] applied
+    to the temporal spike.
+
+    Parameters
+    ----------
+    prev, cur, nxt : (M, N) float arrays
+        Linearised frames n-1, n, n+1 aligned to frame n [gray levels].
+    c : float
+        Eq. (19) threshold [gray levels].
+    c_low : float
+        Lower threshold, 0 < c_low <= c [gray levels].
+    tol : float, optional
+        Largest |I_{n-1} - I_{n+1}| [gray levels] (stationarity half of Eq. (19)).
+    valid : (M, N) bool array, optional
+        Pixels where all three frames hold data.
+    slack : (M, N) float array, optional
+        Extra threshold per pixel [gray levels] (registration error of warped
+        neighbours), added to both thresholds.
+    min_high : int
+        Pixels at c a component needs [px].
+
+    Returns
+    -------
+    (M, N) bool array
+    """
+    import cv2
+
+    if not (math.isfinite(c) and c > 0):
+        raise ValueError(f"threshold c must be a positive number of gray levels, got {c!r}")
+    if not (math.isfinite(c_low) and 0 < c_low <= c):
+        raise ValueError(f"c_low must lie in (0, c] gray levels, got {c_low!r} (c = {c!r})")
+    prev, cur, nxt = _check_triplet(prev, cur, nxt)
+    spike = np.minimum(cur - prev, cur - nxt)
+    if slack is not None:
+        spike -= np.asarray(slack, np.float32)
+    low = spike >= np.float32(c_low)
+    idx = np.flatnonzero(low.ravel())
+    if tol is not None and idx.size:
+        bad = np.abs(prev.ravel()[idx] - nxt.ravel()[idx]) > np.float32(tol)
+        low.ravel()[idx[bad]] = False
+        idx = idx[~bad]
+    if valid is not None:
+        low &= np.asarray(valid, dtype=bool)
+        idx = idx[low.ravel()[idx]]
+    if c_low == c or idx.size == 0:
+        return low
+    n, lab = cv2.connectedComponents(low.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+    li = lab.ravel()[idx]
+    high = spike.ravel()[idx] >= np.float32(c)
+    keep = np.bincount(li[high], minlength=n) >= max(int(min_high), 1)
+    keep[0] = False
+    out = np.zeros(low.shape, bool)
+    out.ravel()[idx[keep[li]]] = True
+    return out

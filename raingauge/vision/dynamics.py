@@ -249,8 +249,11 @@ class RainDynamics:
         st = self.stride
         self.gh = -(-(-(-self.shape[0] // self.cell)) // st) * st
         self.gw = -(-(-(-self.shape[1] // self.cell)) // st) * st
-        self._acc = np.zeros((self.gh * self.gw, self.K), np.float64)
-        self._cnt = np.zeros(self.gh * self.gw, np.float64)
+        # running sums kept directly on the grid of stride x stride cells (the
+        # resolution of the field), so that field() needs no reduction
+        self._sbh, self._sbw = self.gh // st, self.gw // st
+        self._acc = np.zeros((self._sbh * self._sbw, self.K), np.float64)
+        self._cnt = np.zeros(self._sbh * self._sbw, np.float64)
         self._ring: deque = deque()
 
     @property
@@ -270,7 +273,8 @@ class RainDynamics:
         if b.shape != self.shape:
             raise ValueError(f"binary field has shape {b.shape}, expected {self.shape}")
         rows, cols, energy, w = rain_pixel_energies(b, masks=self.masks, max_pixels=self.max_pixels)
-        cid = (rows // self.cell) * self.gw + cols // self.cell
+        side = self.cell * self.stride
+        cid = (rows // side) * self._sbw + cols // side
         # Sum the frame's contributions per cell (sorted segments, no scatter-add).
         if cid.size:
             order = np.argsort(cid, kind="stable")
@@ -303,10 +307,8 @@ class RainDynamics:
         # box of about smooth x smooth cells evaluated every `stride` cells.
         st = self.stride
         bh, bw = self.gh // st, self.gw // st
-        acc = self._acc.reshape(self.gh, self.gw, self.K)
-        cnt = self._cnt.reshape(self.gh, self.gw)
-        blk = acc.reshape(bh, st, bw, st, self.K).sum(axis=(1, 3)).astype(np.float32)
-        blkn = cnt.reshape(bh, st, bw, st).sum(axis=(1, 3)).astype(np.float32)
+        blk = self._acc.reshape(bh, bw, self.K).astype(np.float32)
+        blkn = self._cnt.reshape(bh, bw).astype(np.float32)
         sm = cv2.boxFilter(blk, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
         events = np.maximum(cv2.boxFilter(blkn, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT), 0.0)
         cy = np.arange(bh) * st + st // 2

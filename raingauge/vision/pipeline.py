@@ -21,11 +21,11 @@ from typing import Iterable, Iterator
 
 import numpy as np
 
-from raingauge.vision.candidates import candidates, luminance
+from raingauge.vision.candidates import candidates, hysteresis_candidates, luminance
 from raingauge.vision.dynamics import DynamicsField, RainDynamics
 from raingauge.vision.motion import WARP_MIN_SHIFT_PX, MotionTracker, transform_magnitude_px, warp_to
 from raingauge.vision.photometric import StreakFits, beta_max_for_exposure, photometric_filter
-from raingauge.vision.removal import remove_window, run_prefilter
+from raingauge.vision.removal import RUNS, remove_window, run_pair, run_prefilter
 
 __all__ = ["detect_streaks", "Derainer", "DerainedFrame", "derain_clip", "estimate_noise_sigma"]
 
@@ -171,6 +171,12 @@ class Derainer:
     registration_px : float
         Registration error allowed for warped neighbours [px]: when the camera
         moves, c is raised by this times the local gradient magnitude.
+    c_low : float, optional
+        Hysteresis: candidates are the connected one-frame spikes of at least
+        ``c_low`` [gray levels] that reach c somewhere (see
+        :func:`raingauge.vision.candidates.hysteresis_candidates`), so faint
+        streaks and rims are found whole.  Default min(c, max(c / 2,
+        2 sigma)); c_low >= c is the paper's single threshold.
     warmup : int, optional
         Distinct frames gathered before the first output, so that the first
         frames are segmented with a correlation built over several frames
@@ -184,7 +190,7 @@ class Derainer:
                  noise_sigma: float | str | None = None, min_pixels: int = 5, grow_px: int = 1,
                  runs: bool = True, repeat_tol: float = 0.1, tol: float | str | None = "auto",
                  dynamics: dict | None = None, segment_every: int = 6, warmup: int | None = None,
-                 registration_px: float = 0.15):
+                 registration_px: float = 0.15, c_low: float | None = None):
         self.profile = profile
         self._c_auto = c is None and profile is None
         if c is None:
@@ -218,8 +224,12 @@ class Derainer:
         self._since_field = 0
         self.segment_every = int(segment_every)
         self.registration_px = float(registration_px)
+        if c_low is not None and not (math.isfinite(c_low) and c_low > 0):
+            raise ValueError(f"c_low must be a positive number of gray levels, got {c_low!r}")
+        self.c_low = c_low
         self.warmup = self.f // 2 if warmup is None else int(warmup)
         self.streak_log: list[tuple[int, int]] = []   # (frame index, accepted streaks)
+        self._run_cache: dict[tuple[int, int], np.ndarray] = {}
 
     # ----------------------------------------------------------------- helpers
     def _linearize(self, frame: np.ndarray) -> np.ndarray:
@@ -238,6 +248,12 @@ class Derainer:
         if j == n:
             return arr, None
         return warp_to(arr, self._tracker.between(j, n))
+
+    def _c_low(self) -> float:
+        """Lower threshold of the hysteresis [gray levels]."""
+        if self.c_low is not None:
+            return min(float(self.c_low), self.c)
+        return min(self.c, max(0.5 * self.c, 2.0 * self.noise_sigma))
 
     def _reflect(self, i: int, last: int) -> int:
         """Reflect an index into [0, last] (reflect-101)."""
@@ -317,35 +333,52 @@ class Derainer:
         valid = v1 if v2 is None else (v2 if v1 is None else v1 & v2)
         u = self._units[n]
         cur = u.lum
-        thr = cur - np.float32(self.c)
+        import cv2
+
+        # Elementwise tests with OpenCV (vectorised, no float64 and no
+        # temporary per comparison); masks are 0/1 uint8 viewed as bool.
+        thr = cv2.subtract(cur, float(self.c))
+        slack = None
         if valid is not None and self.registration_px > 0:
             # Warped neighbours carry a registration error of a fraction of a
             # pixel, i.e. an intensity error proportional to the local gradient:
             # thin bright lines would otherwise look like one-frame spikes.
-            import cv2
-
             gx = cv2.Sobel(cur, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
             gy = cv2.Sobel(cur, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
-            thr = thr - np.float32(self.registration_px) * cv2.magnitude(gx, gy)
-        rise = prev <= thr
-        fall = nxt <= thr
-        cand = rise & fall                      # Eq. (19)
+            slack = cv2.multiply(cv2.magnitude(gx, gy), float(self.registration_px))
+            thr = cv2.subtract(thr, slack)
+        rise = cv2.compare(prev, thr, cv2.CMP_LE)
+        fall = cv2.compare(nxt, thr, cv2.CMP_LE)
+        cand = cv2.bitwise_and(rise, fall)      # Eq. (19)
         tol = self.tol
         if self._tol_auto:
             tol = 3.0 * math.sqrt(2.0) * self.noise_sigma
         if tol is not None:                     # ... with I_{n-1} = I_{n+1}
-            ci = np.flatnonzero(cand.ravel())
-            bad = np.abs(prev.ravel()[ci] - nxt.ravel()[ci]) > tol
-            cand.ravel()[ci[bad]] = False
+            cand = cv2.bitwise_and(cand, cv2.compare(cv2.absdiff(prev, nxt), float(tol), cv2.CMP_LE))
+        rise = np.bitwise_and(rise, 1, out=rise).view(bool)
+        fall = np.bitwise_and(fall, 1, out=fall).view(bool)
+        cand = np.bitwise_and(cand, 1, out=cand).view(bool)
         if valid is not None:
             cand &= valid
+        cand = _drop_isolated(cand, self.min_pixels)
         b, streaks = photometric_filter(prev, cur, nxt, cand, beta_max=self.beta_max, noise_sigma=self.noise_sigma,
                                         min_pixels=self.min_pixels)
+        n_streaks = int(np.count_nonzero(streaks.accepted))
+        c_low = self._c_low()
+        if c_low < self.c and cand.any():
+            # Hysteresis: faint streaks and rims found whole.  A component that
+            # merges a bright streak with its surroundings and fails Eq. (18)
+            # keeps the streak accepted at c.
+            hyst = hysteresis_candidates(prev, cur, nxt, c=self.c, c_low=c_low, tol=tol, valid=valid, slack=slack)
+            b_low, fits_low = photometric_filter(prev, cur, nxt, hyst, beta_max=self.beta_max,
+                                                 noise_sigma=self.noise_sigma, min_pixels=self.min_pixels)
+            b |= b_low
+            n_streaks = max(n_streaks, int(np.count_nonzero(fits_low.accepted)))
         if not boundary:
             u.rise, u.fall = rise, fall
         u.warped = v1 is not None or v2 is not None
         u.b = b
-        u.n_streaks = int(np.count_nonzero(streaks.accepted))
+        u.n_streaks = n_streaks
         if not boundary:
             self._dyn.update(b)
 
@@ -382,6 +415,38 @@ class Derainer:
         if old in self._units:
             del self._units[old]
         return results
+
+
+def _shift_nearest(mask: np.ndarray, dx: float, dy: float) -> np.ndarray:
+    """``out(x, y) = mask(x + dx, y + dy)`` to the nearest pixel, False outside (a slice copy)."""
+    ix, iy = int(round(dx)), int(round(dy))
+    if ix == 0 and iy == 0:
+        return mask
+    h, w = mask.shape
+    out = np.zeros_like(mask)
+    if abs(ix) >= w or abs(iy) >= h:
+        return out
+    out[max(0, -iy):h - max(0, iy), max(0, -ix):w - max(0, ix)] = \
+        mask[max(0, iy):h - max(0, -iy), max(0, ix):w - max(0, -ix)]
+    return out
+
+
+def _drop_isolated(mask: np.ndarray, min_pixels: int) -> np.ndarray:
+    """``mask`` without its isolated pixels (no 8-neighbour), when streaks need 2 pixels or more.
+
+    Camera noise makes most candidates single pixels; removing them before
+    the labelling changes no streak of ``min_pixels >= 2`` and saves most of
+    the per-pixel work.
+    """
+    import cv2
+
+    if min_pixels < 2:
+        return mask
+    ring = np.ones((3, 3), np.uint8)
+    ring[1, 1] = 0
+    # a neighbour within the 8 around: dilation by the ring (much cheaper than counting)
+    near = cv2.dilate(mask.view(np.uint8), ring, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    return mask & near.view(bool)
 
 
 def _sample_bilinear(img: np.ndarray, M: np.ndarray, idx: np.ndarray) -> np.ndarray:
@@ -454,6 +519,20 @@ class _StreamWindow:
         if self.ids[1:6] != list(range(self.n - 2, self.n + 3)) or any(
                 v.rise is None or v.fall is None for v in near):
             return np.zeros(self.shape, bool)   # the two ends of the stream: no runs
+        if not any(self._moved[1:6]) and not any(v.warped for v in near):
+            # a static camera: the run masks are those of absolute frame pairs,
+            # three of the five shared with the next frame's window
+            cache = self.d._run_cache
+            pre = np.zeros(self.shape, bool)
+            for a, e in RUNS:
+                key = (self.n + a, self.n + e)
+                m = cache.get(key)
+                if m is None:
+                    m = cache[key] = run_pair(near[a + 2].rise, near[e + 2].fall)
+                pre |= m
+            for key in [key for key in cache if key[0] < self.n - 1]:
+                del cache[key]
+            return pre
         rises, falls = [], []
         for k, v in zip(range(1, 6), near):
             if not self._moved[k] and not v.warped:
@@ -462,10 +541,15 @@ class _StreamWindow:
                 continue
             # carry the unit's own one-sided tests into frame n (nearest pixel)
             h, w = self.shape
+            M = self._M[k]
+            translation = np.allclose(M[2], [0, 0, 1]) and np.allclose(M[:2, :2], np.eye(2))
             for src, dst in ((v.rise, rises), (v.fall, falls)):
-                m = cv2.warpAffine(src.view(np.uint8), self._M[k][:2], (w, h),
+                if translation:
+                    dst.append(_shift_nearest(src, M[0, 2], M[1, 2]))
+                    continue
+                m = cv2.warpAffine(src.view(np.uint8), M[:2], (w, h),
                                    flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP)
-                dst.append(m.astype(bool))
+                dst.append(m.view(bool))
         return run_prefilter(rises, falls)
 
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["replace_single", "find_runs", "run_prefilter", "runs_in_values", "remove_rain", "remove_window",
+__all__ = ["replace_single", "find_runs", "run_prefilter", "run_pair", "runs_in_values", "remove_rain", "remove_window",
            "ArrayWindow", "RUNS"]
 
 #: Runs of consecutive rain frames containing the centre (offsets relative to it),
@@ -58,8 +58,11 @@ def run_prefilter(rises: list, falls: list) -> np.ndarray:
 
     Every run [a, e] needs a rise at a and a fall at e; these one-sided tests
     are by-products of Eq. (19) for each frame, so this costs a few boolean
-    operations.  A pixel with fewer than two such neighbours (3 x 3) is an
-    isolated noise coincidence, not part of a streak, and is dropped.
+    operations.  The pixels of one streak share its run [a, e]: a pixel with
+    fewer than two neighbours (3 x 3) of the same run is an isolated noise
+    coincidence, not part of a streak, and is dropped.  (Testing each run on
+    its own rather than their union keeps noisy cameras, where one-sided
+    changes of c are common, from flooding the run test.)
     """
     import cv2
 
@@ -67,10 +70,24 @@ def run_prefilter(rises: list, falls: list) -> np.ndarray:
     F = dict(zip(range(-2, 3), falls))
     pre = np.zeros_like(rises[2])
     for a, e in RUNS:
-        pre |= R[a] & F[e]
-    u8 = pre.view(np.uint8)
-    count = cv2.boxFilter(u8, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
-    return pre & (count >= 3)
+        pre |= run_pair(R[a], F[e])
+    return pre
+
+
+def run_pair(rise: np.ndarray, fall: np.ndarray) -> np.ndarray:
+    """Pixels that may lie in the run [a, e]: a rise at a, a fall at e, and two such neighbours (3 x 3).
+
+    Parameters
+    ----------
+    rise, fall : (M, N) bool arrays
+        ``I_a - I_{a-1} >= c`` and ``I_e - I_{e+1} >= c``.
+    """
+    import cv2
+
+    run = rise & fall
+    count = cv2.boxFilter(run.view(np.uint8), cv2.CV_16U, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+    run &= count >= 3
+    return run
 
 
 def find_runs(lum, *, c: float, where: np.ndarray | None = None, tol: float | None = None
@@ -205,8 +222,9 @@ def remove_window(window, rain: np.ndarray, region: np.ndarray, *, c: float, run
 
                 cols = np.arange(flat.size)
                 centre = window.centre_lum
-                bg_before = centre.copy()
-                bg_after = centre.copy()
+                # only the run pixels are read: no need to fill the rest
+                bg_before = np.empty_like(centre)
+                bg_after = np.empty_like(centre)
                 bg_before.ravel()[flat] = v[before, cols]
                 bg_after.ravel()[flat] = v[after, cols]
                 m = np.zeros(centre.shape, bool)
