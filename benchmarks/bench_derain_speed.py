@@ -79,7 +79,7 @@ def bench(shape, T):
         lambda n: detect_streaks(lum[n - 1], lum[n], lum[n + 1], c=3.0, beta_max=bm, noise_sigma=2.0), triples)
     bs = {n: detect_streaks(lum[n - 1], lum[n], lum[n + 1], c=3.0, beta_max=bm, noise_sigma=2.0)[0] for n in triples}
     tr = MotionTracker()
-    res["motion estimate (phase corr. + ECC)"] = per_frame_ms(tr.add, lum)
+    res["motion estimate (phase corr. + Gauss-Newton)"] = per_frame_ms(tr.add, lum)
     dyn = RainDynamics(shape)
     res["dynamics update (R_b)"] = per_frame_ms(lambda n: dyn.update(bs[n]), triples)
     every = Derainer(None).segment_every

@@ -222,6 +222,9 @@ FIELDS: tuple[Field, ...] = (
     Field("quality", "flags", "quality flags, comma separated", sql_type="TEXT"),
     Field("frames", "count", "frames processed in the last step", sql_type="INTEGER"),
     Field("corrupt_frames", "count", "corrupt frames skipped since start", sql_type="INTEGER"),
+    Field("dropped_frames", "count", "frames of the last step the gauge could not take in real time "
+          "(dropped by the camera side, not measured; the rate counts only measured frames)",
+          sql_type="INTEGER"),
     Field("exposure_s", "s", "camera exposure time"),
     Field("f_number", "-", "lens F-number"),
     Field("focus_distance_m", "m", "focus distance"),

@@ -209,8 +209,9 @@ def _instrument(source, tmp_path=None, **kw):
     records = []
     kw.setdefault("window_s", 1.0)
     kw.setdefault("step_s", 0.5)
+    kw.setdefault("gauge_factory", StepGauge)
     inst = Instrument(prof, Grabber(source, shape=SHAPE, backoff_s=(0.05, 0.2)), history=hist,
-                      gauge_factory=StepGauge, on_record=records.append, wall_t0=1.79e9, **kw)
+                      on_record=records.append, wall_t0=1.79e9, **kw)
     return inst, records, hist
 
 
@@ -472,3 +473,126 @@ def test_run_command_reports_bad_configuration(tmp_path, capsys):
         p = argparse.ArgumentParser()
         run_cmd.add_arguments(p)
         run_cmd.run(p.parse_args(["--sim-size", "big"]))
+
+
+# ---------------------------------------------------------------------- a gauge slower than the camera
+class SlowStepGauge(StepGauge):
+    """StepGauge that needs ``cost_s`` per frame, and remembers the frame times it was given."""
+
+    cost_s = 0.02
+
+    def __init__(self, *a, **kw):
+        super().__init__(*a, **kw)
+        self.times = []
+
+    def process(self, frame, t_s=None):
+        time.sleep(self.cost_s)
+        self.times.append(t_s)
+        return super().process(frame, t_s)
+
+
+def _slow_run(realtime):
+    src = ListSource(150, value=80, fps=200.0)          # 0.75 s of camera time; the gauge takes 50 frames/s
+    src.realtime = realtime
+    gauges = []
+
+    def factory(*a, **kw):
+        gauges.append(SlowStepGauge(*a, **kw))
+        return gauges[-1]
+
+    records = []
+    inst = Instrument(small_profile(), Grabber(src, shape=SHAPE, queue_size=4), window_s=0.2, step_s=0.1,
+                      gauge_factory=factory, on_record=records.append, wall_t0=1.79e9)
+    return inst.run(), records, gauges[0].times
+
+
+def test_a_paced_source_drops_frames_explicitly_when_the_gauge_is_slower():
+    """A camera (or a file / the simulated camera played in real time) does not wait for the gauge:
+    frames it cannot take are dropped, but never silently - counted per record and flagged, and the
+    frames measured keep their true times, so the gauge sees the gaps."""
+    summary, records, times = _slow_run(realtime=True)
+    assert summary["dropped_frames"] > 0
+    assert summary["frames"] + summary["dropped_frames"] == 150          # every frame measured or counted
+    assert sum(r["frames"] for r in records) == summary["frames"]
+    assert sum(r["dropped_frames"] for r in records) == summary["dropped_frames"]
+    for r in records:
+        assert ("dropped_frames" in r["quality"]) == (r["dropped_frames"] > 0)
+    steps = np.diff(np.asarray(times) * 200.0)
+    assert np.allclose(steps, np.round(steps)) and steps.max() >= 2     # true frame slots, with gaps
+    assert times[-1] == pytest.approx(149 / 200.0)                        # the lag stayed bounded
+
+
+def test_an_unpaced_source_waits_for_the_gauge_and_loses_nothing():
+    summary, records, times = _slow_run(realtime=False)
+    assert summary["dropped_frames"] == 0 and summary["frames"] == 150
+    assert all(r["dropped_frames"] == 0 and "dropped_frames" not in r["quality"] for r in records)
+    assert np.allclose(np.diff(times), 1 / 200.0)
+
+
+def test_dropped_frames_are_stored_in_the_history(tmp_path):
+    src = ListSource(120, value=80, fps=200.0)
+    src.realtime = True
+    inst, records, _ = _instrument(src, tmp_path, gauge_factory=SlowStepGauge, window_s=0.2, step_s=0.1)
+    summary = inst.run()
+    h = History(tmp_path / "h.sqlite", readonly=True)
+    rows = list(h.rows())
+    assert sum(r["dropped_frames"] for r in rows) == summary["dropped_frames"] > 0
+    assert all(("dropped_frames" in (r["quality"] or "")) == (r["dropped_frames"] > 0) for r in rows)
+    h.close()
+
+
+# ---------------------------------------------------------------------- worker processes
+def test_simulated_camera_renders_in_its_own_process():
+    pytest.importorskip("raingauge.render.simulator").simulate
+    from raingauge.instrument.sources import scaled_profile
+
+    prof = scaled_profile(load_profile("gauge-default"), 64, 48)
+    local = SimulatedSource(5.0, prof, seed=3, limit_frames=6, process=False)
+    remote = SimulatedSource(5.0, prof, seed=3, limit_frames=6, process=True, prefetch=2)
+    local.open()
+    remote.open()
+    try:
+        proc = remote._proc
+        assert proc.pid != os.getpid() and proc.is_alive()
+        a = [local.read() for _ in range(6)]
+        b = [remote.read() for _ in range(6)]
+        assert local.read() is None and remote.read() is None
+    finally:
+        local.close()
+        remote.close()
+    assert all(f.shape == prof.shape and f.dtype == np.uint8 for f in b)
+    assert all(np.array_equal(x, y) for x, y in zip(a, b))                # the same camera either way
+    assert not proc.is_alive()
+
+
+def test_diagnostics_run_in_an_idle_priority_process(tmp_path):
+    prof = small_profile()
+    rng = np.random.default_rng(1)
+    frames = [rng.integers(40, 60, SHAPE, dtype=np.uint8) for _ in range(6)]
+    idle = Diagnostics(tmp_path / "idle", prof).start((6,) + SHAPE)
+    try:
+        pid = idle.pid
+        assert pid != os.getpid()
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:                 # lowered after its imports
+            if os.sched_getscheduler(pid) == os.SCHED_IDLE or os.getpriority(os.PRIO_PROCESS, pid) == 19:
+                break
+            time.sleep(0.1)
+        assert os.sched_getscheduler(pid) == os.SCHED_IDLE or os.getpriority(os.PRIO_PROCESS, pid) == 19
+    finally:
+        idle.close()
+    diag = Diagnostics(tmp_path / "diag", prof, priority="normal")
+    try:
+        assert diag.submit(frames, time_unix=1.79e9, rain_rate_mm_h=3.0, window_s=60.0)
+        assert not diag.submit(frames, time_unix=1.79e9 + 1, rain_rate_mm_h=3.0, window_s=60.0)  # one at a time
+        deadline = time.monotonic() + 60
+        while diag.snapshots == 0 and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert diag.snapshots == 1 and diag.skipped == 1
+        (snap,) = list((tmp_path / "diag").iterdir())
+        assert snap.name == "20260921T141320Z"
+        assert {"frame.png", "derained.png", "needles.png", "advice.json"} <= {p.name for p in snap.iterdir()}
+    finally:
+        diag.close()
+    with pytest.raises(ValueError, match="valid"):
+        Diagnostics(tmp_path / "x", prof, priority="low")

@@ -73,20 +73,45 @@ def test_hysteresis_raises_recall_of_faint_streaks_without_false_rain():
 
 # ------------------------------------------------------------ fast paths
 @pytest.mark.parametrize("shift", [(0.7, 0.2), (-1.4, 2.6), (3.0, -0.45), (0.0, 0.0)])
-def test_translation_warp_matches_opencv_cubic(shift):
-    from raingauge.vision.motion import _translate_cubic
+def test_translation_warp_is_an_accurate_cubic_shift(shift):
+    from raingauge.vision.motion import _translate_cubic, warp_to
+
+    dx, dy = shift
+    yy, xx = np.mgrid[0:60, 0:80].astype(np.float64)
+    smooth = lambda x, y: 100 + 40 * np.sin(2 * np.pi * (x / 17.0 + y / 23.0))   # noqa: E731
+    img = smooth(xx, yy).astype(np.float32)
+    out = _translate_cubic(img, dx, dy, a=-0.5)
+    inner = (slice(6, -6), slice(6, -6))
+    # out(x) = img(x + d): a smooth image is moved by d to within a hundredth of a gray level per DN/px
+    assert out.shape == img.shape and np.abs(out - smooth(xx + dx, yy + dy))[inner].max() < 0.6
+    # a ramp is reproduced exactly (OpenCV's cubic, a = -0.75, moves it by up to 0.04 px)
+    ramp = np.tile(np.arange(40, dtype=np.float32), (8, 1))
+    np.testing.assert_allclose(_translate_cubic(ramp, dx, 0.0, a=-0.5)[:, 6:-6], ramp[:, 6:-6] + np.float32(dx),
+                               atol=1e-3)
+    # warp_to takes this path for translations, with OpenCV's kernel (a = -0.75) and the valid mask
+    M = np.array([[1, 0, dx], [0, 1, dy], [0, 0, 1]], dtype=np.float64)
+    warped, valid = warp_to(img, M)
+    if max(abs(dx), abs(dy)) >= 0.3:
+        ref = cv2.warpAffine(img, M[:2], (80, 60), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP,
+                             borderMode=cv2.BORDER_REPLICATE)
+        assert np.abs(warped - ref)[inner].max() < 0.5      # OpenCV quantises the fraction to 1/32 px
+        assert valid is not None and not valid.all() and valid[inner].all()
+
+
+def test_translation_registration_is_accurate_on_a_rendered_pan():
+    from raingauge.render.scenes import pan_exposure
+    from raingauge.vision import MotionTracker
 
     rng = np.random.default_rng(0)
-    img = cv2.GaussianBlur(rng.uniform(0, 255, (60, 80)).astype(np.float32), (0, 0), 2.0)
-    M = np.array([[1, 0, shift[0]], [0, 1, shift[1]]])
-    ref = cv2.warpAffine(img, M, (80, 60), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP,
-                         borderMode=cv2.BORDER_REPLICATE)
-    out = _translate_cubic(img, *shift)
-    # OpenCV quantises the fraction to 1/32 px; the rest is the same cubic convolution
-    assert out.shape == img.shape and np.abs(out - ref)[4:-4, 4:-4].max() < 0.5
-    # and it does move the image: a smooth image shifted by (dx, dy) matches the shift
-    if shift == (3.0, -0.45):
-        np.testing.assert_allclose(_translate_cubic(img, 3.0, 0.0)[:, :-3], img[:, 3:], atol=1e-3)
+    tex = cv2.GaussianBlur(rng.uniform(0, 1, (200, 300)).astype(np.float32), (0, 0), 2.0)
+    tex = 30 + 170 * (tex - tex.min()) / (tex.max() - tex.min())
+    for vx, vy in ((21.0, 6.0), (-39.0, 13.5)):          # px/s at 30 frames/s
+        tr = MotionTracker()
+        for k in range(4):
+            frame = pan_exposure(tex, (vx, vy), k / 30.0, 0.004) + rng.normal(0, 2, tex.shape).astype(np.float32)
+            tr.add(frame)
+        for k in range(3):
+            np.testing.assert_allclose(tr.between(k, k + 1)[:2, 2], [vx / 30.0, vy / 30.0], atol=0.02)
 
 
 def test_mask_shift_matches_opencv_nearest():

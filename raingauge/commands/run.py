@@ -46,12 +46,13 @@ def format_record(rec: dict) -> str:
         return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, fmt)
 
     flags = ",".join(rec.get("quality") or []) or "-"
+    dropped = f" (+{rec['dropped_frames']} dropped)" if rec.get("dropped_frames") else ""
     if rec.get("missing"):
         return f"{rec.get('time_utc') or ''} MISSING (no frames)  acc {f(rec.get('accumulation_mm'), '.2f')} mm  status 0x{rec['status']:02X}"
     return (f"{rec.get('time_utc') or ''} rate {f(rec.get('rain_rate_mm_h'), '7.2f')} mm/h  "
             f"acc {f(rec.get('accumulation_mm'), '7.2f')} mm  drops {f(rec.get('drops_counted'), 'd'):>5}  "
             f"Dm {f(rec.get('dm_mm'), '.2f')} mm  class {f(rec.get('intensity_class'), 'd')}  "
-            f"frames {rec.get('frames')}  status 0x{rec['status']:02X}  flags {flags}")
+            f"frames {rec.get('frames')}{dropped}  status 0x{rec['status']:02X}  flags {flags}")
 
 
 def build_instrument(config, *, print_records=True, gauge_factory=None):

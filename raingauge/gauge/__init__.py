@@ -22,15 +22,18 @@ from raingauge.gauge.streaks import (
     StreakProps,
     change_images,
     detect_streaks,
+    measure_streak_table,
     measure_streaks,
     radius_from_width_m,
+    spike_image,
     velocity_from_length_m_s,
 )
 from raingauge.gauge.volume import SampleVolume, effective_area_rate_px2_s, pass_probability
 
 __all__ = [
     "RainGauge", "RECORD_KEYS", "QUALITY_FLAGS",
-    "StreakProps", "change_images", "detect_streaks", "measure_streaks",
+    "StreakProps", "change_images", "spike_image", "detect_streaks", "measure_streaks",
+    "measure_streak_table",
     "radius_from_width_m", "velocity_from_length_m_s",
     "passes_velocity_law", "passes_blur", "velocity_log_ratio",
     "SampleVolume", "pass_probability", "effective_area_rate_px2_s",

@@ -55,7 +55,14 @@ from raingauge.gauge.rejection import (
     photometric_focus,
     velocity_log_ratio,
 )
-from raingauge.gauge.streaks import StreakProps, change_images, detect_streaks, fit_batch
+from raingauge.gauge.streaks import (
+    StreakProps,
+    change_images,
+    detect_streaks,
+    fit_batch,
+    measure_streak_table,
+    spike_image,
+)
 from raingauge.gauge.volume import (
     DEFOCUS_MODELS,
     EDGE_MARGIN_PX,
@@ -72,6 +79,10 @@ NOMINAL_DROP_BRIGHTNESS_DN = 200.0
 #: Law-abiding streaks needed before the drop brightness E_r is trusted; frames are
 #: kept back (at most until the next record) until then.
 MATURE_BRIGHTNESS_SAMPLES = 30
+
+#: Largest mean squared residual (in noise units) of a streak's plateau rows against the
+#: uniform box across it: drops read 1-4, the two-signed changes of moving scenery 15-600.
+MAX_CROSS_CHI2 = 8.0
 
 #: The record contract (the keys every record carries, in order).
 RECORD_KEYS: tuple[str, ...] = (
@@ -198,6 +209,8 @@ class RainGauge:
         self._pending: list = []                        # frames awaiting the E_r estimate
         self._rng = np.random.default_rng(12345)
         self._empty_scale = self._typical_drop_rate()
+        # a linear camera: Eq. (19) on the 8-bit frames themselves, exactly, in int16
+        self._linear_u8 = bool(profile.is_linear)
 
     # ------------------------------------------------------------------ public
     def process(self, frame, t_s: float | None = None) -> list[dict]:
@@ -231,13 +244,14 @@ class RainGauge:
         lin = self.profile.linearize(frame)
         if lin.dtype != np.float32:
             lin = lin.astype(np.float32)
-        self._buffer.append((t_s, lin, frame))
+        self._buffer.append((t_s, lin, frame if frame.dtype == np.uint8 else lin))
         out: list[dict] = []
         if len(self._buffer) == 3:
-            (tp, prev, _), (tc, cur, raw), (tn, nxt, _) = self._buffer
+            (tp, prev, raw_p), (tc, cur, raw), (tn, nxt, raw_n) = self._buffer
             gap = (tc - tp > 1.5 * self._frame_interval) or (tn - tc > 1.5 * self._frame_interval)
             out.extend(self._emit_until(tc))
-            self._analyse(prev, cur, nxt, raw, tc, gap)
+            raws = (raw_p, raw, raw_n) if self._linear_u8 else None
+            self._analyse(prev, cur, nxt, raw, tc, gap, raws=raws)
         return out
 
     def flush(self) -> list[dict]:
@@ -299,7 +313,7 @@ class RainGauge:
             flags.add("underexposed")
         # a drop changes a pixel by a fraction beta < 0.1 of its contrast: large changes between
         # the neighbouring frames n-1 and n+1 over many pixels are scene or camera motion
-        if float(np.mean(np.abs(neighbour_change[::2, ::2]) >= self._motion_dn)) > 0.005:
+        if float(np.mean(np.abs(neighbour_change) >= self._motion_dn)) > 0.005:
             flags.add("scene_motion")
         lap = cv2.Laplacian(cv2.GaussianBlur(cur[::2, ::2], (3, 3), 0), cv2.CV_32F)
         sharp = float(np.mean(np.abs(lap)))
@@ -312,31 +326,37 @@ class RainGauge:
             flags.add("dropped_frames")
         return flags
 
-    def _analyse(self, prev, cur, nxt, raw, t, gap):
-        import cv2
-
+    def _analyse(self, prev, cur, nxt, raw, t, gap, raws=None):
         prof = self.profile
-        spike, change = change_images(prev, cur, nxt)
-        flags = self._frame_flags(raw, cur, cv2.subtract(nxt, prev), gap)
+        if raws is not None and all(r.dtype == np.uint8 for r in raws):
+            spike = spike_image(*raws)
+        else:
+            spike = spike_image(prev, cur, nxt)
+        # the change I_n - (I_{n-1} + I_{n+1}) / 2 is computed only where it is used
+        change = (prev, cur, nxt)
+        flags = self._frame_flags(raw, cur, nxt[::2, ::2] - prev[::2, ::2], gap)
         slope = float(np.median(self._slopes)) if len(self._slopes) >= 5 else 0.0
         labels, stats = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope)
         rejected = 0
         counted = []
         if np.any(stats[1:, 4] > 0):
             ref_bg = None
+            contrast = None
             if self.defocus_model == "uniform" and len(self._brightness) >= 10:
                 # Eq. (18): a streak changes a pixel by beta (E_r - I_b); dividing by the local
                 # contrast removes the background's texture from the streak's profile
                 e_r = float(np.percentile(np.asarray(self._brightness), 90))
-                bg = cv2.subtract(cur, change)
-                ref_bg = float(np.median(bg[::4, ::4]))
+                ref_bg = float(np.median(0.5 * (prev[::4, ::4] + nxt[::4, ::4])))
                 c_ref = e_r - ref_bg
                 if c_ref > 5.0 * self.c:
-                    denom = np.maximum(np.float32(e_r) - bg, np.float32(0.25 * c_ref))
-                    change = change * (np.float32(c_ref) / denom)
+                    contrast = (e_r, c_ref)
                 else:
                     ref_bg = None
-            prepared, rejected = self._measure(labels, stats, change, prev, cur, t, ref_bg=ref_bg)
+            if self.defocus_model == "uniform":
+                prepared, rejected = self._measure_table(labels, stats, change, prev, cur, t, ref_bg=ref_bg,
+                                                         contrast=contrast)
+            else:
+                prepared, rejected = self._measure(labels, stats, cur - 0.5 * (prev + nxt), prev, cur, t)
         else:
             prepared = []
         entry = [t, flags, rejected]
@@ -382,6 +402,129 @@ class RainGauge:
         # [-0.75, 0.35] of this crude r; keep a margin
         ok &= np.isfinite(r) & (r > -0.95) & (r < 0.55)
         return np.nonzero(ok)[0] + 1
+
+    def _measure_table(self, labels, stats, change, prev, cur, t, *, ref_bg=None, contrast=None):
+        """Closed-form measurement of all screened streaks of a frame at once
+        (:func:`raingauge.gauge.streaks.measure_streak_table`), then the velocity law, the
+        photometric test of Eq. (18) and the overlap chance, all as arrays."""
+        prof = self.profile
+        f = prof.focal_length_px
+        z0 = prof.focus_distance_m
+        T = prof.exposure_s
+        M, N = prof.shape
+        from raingauge.physics.streaks import beta_max
+
+        bmax = beta_max(T)
+        valid = stats[:, 4] > 0
+        sel = self._screen(stats)
+        tab = measure_streak_table(change, labels, stats, sel, valid=valid, cur=cur, prev=prev,
+                                   contrast=contrast, noise_sigma=self.noise_change)
+        w_app, mot, plat = tab["width_apparent"], tab["motion"], tab["plateau"]
+        with np.errstate(all="ignore"):
+            measurable = tab["ok"] & np.isfinite(w_app) & np.isfinite(mot) & (mot > 0) & (w_app > 0) & (plat > 0)
+        n_unmeas = int(np.count_nonzero(~measurable))
+        self.rejections["unmeasurable"] += n_unmeas
+        rejected = n_unmeas
+        slope = tab["slope"]
+        dx = slope * mot
+        yc = 0.5 * (tab["top"] + tab["bottom"])
+        xc = tab["xm"] + slope * (yc - tab["ym"])
+        half_w = 0.5 * (w_app + np.abs(dx)) + EDGE_MARGIN_PX
+        half_h = 0.5 * (w_app + mot) + EDGE_MARGIN_PX
+        with np.errstate(all="ignore"):
+            clipped = measurable & ((xc - half_w < 0) | (xc + half_w > N - 1) | (yc - half_h < 0) |
+                                    (yc + half_h > M - 1))
+        self.rejections["clipped"] += int(np.count_nonzero(clipped))
+        live = measurable & ~clipped
+        with np.errstate(all="ignore"):
+            a_app = w_app * z0 / (2 * f)
+            v_app = mot * z0 / (f * T)
+            law = np.zeros(live.shape, bool)
+            if live.any():
+                law[live] = passes_velocity_law(a_app[live], v_app[live], w_app[live], mot[live],
+                                                model=self.velocity_model)
+        n_law = int(np.count_nonzero(live & ~law))
+        self.rejections["velocity_law"] += n_law
+        rejected += n_law
+        live &= law
+        beta = tab["beta"]
+        with np.errstate(all="ignore"):
+            eq18 = live & np.isfinite(beta) & ~((beta >= -0.05) & (beta <= bmax + 0.05))
+        n18 = int(np.count_nonzero(eq18))
+        self.rejections["photometric_eq18"] += n18
+        rejected += n18
+        live &= ~eq18
+        # a streak's change is one positive box across it (Eqs. 17, 23); moving scenery
+        # leaves two-signed changes that fit it badly
+        with np.errstate(all="ignore"):
+            shapeless = live & ~(tab["chi2"] <= MAX_CROSS_CHI2)
+        n_shape = int(np.count_nonzero(shapeless))
+        self.rejections["cross_profile"] += n_shape
+        rejected += n_shape
+        live &= ~shapeless
+        idx = np.nonzero(live)[0]
+        if idx.size == 0:
+            return [], rejected
+        ib = tab["background_dn"][idx] if ref_bg is None else np.full(idx.size, ref_bg)
+        total = exposure_area_px2(plat[idx], mot[idx], w_app[idx])
+        focused = 4.0 * total / (math.pi * w_app[idx] ** 2)
+        bright = np.isfinite(ib) & (w_app[idx] >= 2.5)
+        self._brightness.extend((ib + focused)[bright].tolist())
+        p_over = (self._overlap_probabilities(labels, valid, tab, idx) if self.overlap_correction
+                  else np.zeros(idx.size))
+        prepared = []
+        for n, k in enumerate(idx):
+            prepared.append({"t": t, "w_app": float(w_app[k]), "mot": float(mot[k]), "dx": float(dx[k]),
+                             "xc": float(xc[k]), "yc": float(yc[k]), "photo": (float(ib[n]), float(total[n])),
+                             "p_overlap": float(p_over[n]), "blur_px": float("nan"),
+                             "width_px": float(w_app[k]), "chi2": float(tab["chi2"][k]),
+                             "slope": float(slope[k])})
+        return prepared, rejected
+
+    def _overlap_probabilities(self, labels, valid, tab, idx) -> np.ndarray:
+        """For each streak in ``idx``: the chance that its own pixels, placed at random in this
+        frame, would touch another detected streak (and be merged with it) [-]."""
+        import cv2
+
+        M, N = labels.shape
+        k_all, oy_all, ox_all = tab["own_k"], tab["own_y"], tab["own_x"]
+        out = np.zeros(idx.size)
+        n_place = 24
+        pieces_k, pieces_y, pieces_x, own_share = [], [], [], []
+        for n, k in enumerate(idx):
+            m = k_all == k
+            ys, xs = oy_all[m], ox_all[m]
+            if ys.size == 0:
+                own_share.append(None)
+                continue
+            ys = ys - ys.min()
+            xs = xs - xs.min()
+            h, w = int(ys.max()) + 1, int(xs.max()) + 1
+            # the footprint grown by one pixel: it touches a streak where the grown one covers it
+            fp = np.zeros((h + 2, w + 2), np.uint8)
+            fp[ys + 1, xs + 1] = 1
+            ys, xs = np.nonzero(cv2.dilate(fp, np.ones((3, 3), np.uint8)))
+            ys, xs = ys - 1, xs - 1
+            if h >= M or w >= N:
+                own_share.append(None)
+                continue
+            n_own = int(np.count_nonzero(k_all == k))
+            oy = self._rng.integers(0, M - h + 1, n_place)
+            ox = self._rng.integers(0, N - w + 1, n_place)
+            pieces_k.append(np.repeat(n * n_place + np.arange(n_place), ys.size))
+            pieces_y.append((oy[:, None] + ys[None, :]).ravel())
+            pieces_x.append((ox[:, None] + xs[None, :]).ravel())
+            own_share.append(n_own * 9.0 / float(M * N))
+        if pieces_k:
+            pk = np.concatenate(pieces_k)
+            py = np.clip(np.concatenate(pieces_y), 0, M - 1)
+            px = np.clip(np.concatenate(pieces_x), 0, N - 1)
+            hit = valid[np.take(labels, py * N + px)]
+            hits = np.bincount(pk, hit, idx.size * n_place).reshape(idx.size, n_place) > 0
+            for n, share in enumerate(own_share):
+                if share is not None:
+                    out[n] = min(max(float(np.mean(hits[n])) - share, 0.0), 0.8)
+        return out
 
     def _measure(self, labels, stats, change, prev, cur, t, ref_bg=None):
         prof = self.profile

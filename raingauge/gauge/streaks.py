@@ -40,6 +40,9 @@ __all__ = [
     "StreakProps",
     "StreakSet",
     "change_images",
+    "spike_image",
+    "measure_streak_table",
+    "cap_offset_px",
     "detect_streaks",
     "measure_streaks",
     "chord_gauss_profile",
@@ -613,6 +616,30 @@ def change_images(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray) -> tuple[n
     return spike, change
 
 
+def spike_image(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray) -> np.ndarray:
+    """min(I_n - I_{n-1}, I_n - I_{n+1}), the left side of Eq. (19) [GargNayar2007], alone.
+
+    Parameters
+    ----------
+    prev, cur, nxt : (M, N) arrays
+        Frames n-1, n, n+1: uint8 (a linear camera; the spike is then exact in int16,
+        at half the memory traffic of float32) or float32 linearised [gray levels].
+
+    Returns
+    -------
+    (M, N) int16 or float32 array [gray levels]
+    """
+    import cv2
+
+    if prev.dtype == np.uint8 and cur.dtype == np.uint8 and nxt.dtype == np.uint8:
+        d1 = cv2.subtract(cur, prev, dtype=cv2.CV_16S)
+        d2 = cv2.subtract(cur, nxt, dtype=cv2.CV_16S)
+    else:
+        d1 = cv2.subtract(cur, prev)
+        d2 = cv2.subtract(cur, nxt)
+    return cv2.min(d1, d2)
+
+
 def fall_kernel(length_px: int, slope: float = 0.0) -> np.ndarray:
     """Normalised line kernel of ``length_px`` rows along the fall direction dx/dy = slope.
 
@@ -675,14 +702,24 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
 
     if not (c > 0 and math.isfinite(c)):
         raise ValueError(f"detection threshold c must be a positive number of gray levels, got {c!r}")
-    if smooth_px <= 1:
-        s = spike
-    elif abs(slope) < 0.05:
-        s = cv2.blur(spike, (1, int(smooth_px)))
+    if spike.dtype == np.int16 and abs(slope) < 0.05 and 0 < smooth_px <= 64:
+        # exact integer box sum (|spike| <= 255): compare the sum with n c
+        n_s = max(int(smooth_px), 1)
+        s = cv2.boxFilter(spike, -1, (1, n_s), normalize=False) if n_s > 1 else spike
+        mask = cv2.compare(s, float(c) * n_s, cv2.CMP_GE)
     else:
-        s = cv2.filter2D(spike, -1, fall_kernel(int(smooth_px), slope), borderType=cv2.BORDER_REFLECT)
-    mask = cv2.compare(s, float(c), cv2.CMP_GE)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8, ltype=cv2.CV_32S)
+        if spike.dtype != np.float32:
+            spike = spike.astype(np.float32)
+        if smooth_px <= 1:
+            s = spike
+        elif abs(slope) < 0.05:
+            s = cv2.blur(spike, (1, int(smooth_px)))
+        else:
+            s = cv2.filter2D(spike, -1, fall_kernel(int(smooth_px), slope), borderType=cv2.BORDER_REFLECT)
+        mask = cv2.compare(s, float(c), cv2.CMP_GE)
+    # 16-bit labels halve the labelling's cost; safe while there are fewer pixels than labels
+    ltype = cv2.CV_16U if cv2.countNonZero(mask) < 65000 else cv2.CV_32S
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8, ltype=ltype)
     stats = stats[:, :5].copy()
     stats[0] = 0
     # components below min_pixels keep their label but get area 0 (never measured);
@@ -691,50 +728,54 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
     big = np.nonzero(stats[:, 4] > 0)[0]
     # merge collinear pieces separated by a short vertical gap
     if big.size > 1 and merge_gap_px > 0:
-        parent = {int(i): int(i) for i in big}
-
-        def find(i):
-            while parent[i] != i:
-                parent[i] = parent[parent[i]]
-                i = parent[i]
-            return i
-
         x, y, w, h = (stats[big, k].astype(float) for k in range(4))
         cx = x + w / 2
-        order = np.argsort(cx)
+        order = np.argsort(cx, kind="stable")
         idx = big[order]
         cxs = cx[order]
-        narrow = (w <= np.maximum(0.5 * h, 8.0))[order]      # near-vertical pieces only
-        for a_i in range(idx.size):
-            if not narrow[a_i]:
-                continue
-            ia = int(idx[a_i])
-            xa, ya, wa, ha = stats[ia, :4]
-            j = a_i + 1
-            while j < idx.size and cxs[j] - cxs[a_i] <= max(wa, 3) + 2:
-                ib = int(idx[j])
-                xb, yb, wb, hb = stats[ib, :4]
-                gap = max(yb - (ya + ha), ya - (yb + hb))
-                if narrow[j] and 0 <= gap <= merge_gap_px and abs(cxs[j] - cxs[a_i]) <= 0.5 * min(wa, wb) + 1.5 \
-                        and 0.5 <= (wa + 1) / (wb + 1) <= 2.0:
-                    parent[find(ib)] = find(ia)
-                j += 1
-        groups: dict[int, list[int]] = {}
-        for i in parent:
-            groups.setdefault(find(i), []).append(i)
-        for root, members in groups.items():
-            if len(members) < 2:
-                continue
-            m = np.array(members)
-            x0, y0 = stats[m, 0].min(), stats[m, 1].min()
-            x1 = (stats[m, 0] + stats[m, 2]).max()
-            y1 = (stats[m, 1] + stats[m, 3]).max()
-            stats[root] = [x0, y0, x1 - x0, y1 - y0, stats[m, 4].sum()]
-            sub = labels[y0:y1, x0:x1]
-            sub[np.isin(sub, m)] = root
-            for i in members:
-                if i != root:
-                    stats[i, 4] = 0
+        xs_, ys_, ws_, hs_ = x[order], y[order], w[order], h[order]
+        narrow = ws_ <= np.maximum(0.5 * hs_, 8.0)            # near-vertical pieces only
+        pairs = []
+        n_big = idx.size
+        for k in range(1, n_big):
+            a_i = np.arange(n_big - k)
+            b_i = a_i + k
+            near = cxs[b_i] - cxs[a_i] <= np.maximum(ws_[a_i], 3) + 2
+            if not near.any():
+                break
+            gap = np.maximum(ys_[b_i] - (ys_[a_i] + hs_[a_i]), ys_[a_i] - (ys_[b_i] + hs_[b_i]))
+            ok = near & narrow[a_i] & narrow[b_i] & (gap >= 0) & (gap <= merge_gap_px) & \
+                (np.abs(cxs[b_i] - cxs[a_i]) <= 0.5 * np.minimum(ws_[a_i], ws_[b_i]) + 1.5) & \
+                ((ws_[a_i] + 1) / (ws_[b_i] + 1) >= 0.5) & ((ws_[a_i] + 1) / (ws_[b_i] + 1) <= 2.0)
+            pairs.extend(zip(idx[a_i[ok]].tolist(), idx[b_i[ok]].tolist()))
+        if pairs:
+            parent: dict[int, int] = {}
+
+            def find(i):
+                parent.setdefault(i, i)
+                while parent[i] != i:
+                    parent[i] = parent[parent[i]]
+                    i = parent[i]
+                return i
+
+            for ia, ib in pairs:
+                parent[find(ib)] = find(ia)
+            groups: dict[int, list[int]] = {}
+            for i in list(parent):
+                groups.setdefault(find(i), []).append(i)
+            for root, members in groups.items():
+                if len(members) < 2:
+                    continue
+                m = np.array(members)
+                x0, y0 = stats[m, 0].min(), stats[m, 1].min()
+                x1 = (stats[m, 0] + stats[m, 2]).max()
+                y1 = (stats[m, 1] + stats[m, 3]).max()
+                stats[root] = [x0, y0, x1 - x0, y1 - y0, stats[m, 4].sum()]
+                sub = labels[y0:y1, x0:x1]
+                sub[np.isin(sub, m)] = root
+                for i in members:
+                    if i != root:
+                        stats[i, 4] = 0
     return labels, stats
 
 
@@ -1136,3 +1177,265 @@ def measure_streaks(change: np.ndarray, labels: np.ndarray, stats: np.ndarray, c
                                prev=prev, cur=cur, shape=shape, valid=stats[:, 4] > 0))
     fit_batch(out, shape=shape)
     return out
+
+
+# ---------------------------------------------------------------- fast path (all streaks at once)
+def _cap_offset_table():
+    """Half-plateau crossing of a streak end beyond the drop centre's row, tabulated in w [px].
+
+    The row sums of a uniform streak (pixel-integrated capsule, caps of radius w/2) smoothed
+    over three rows cross half their plateau at a fixed distance beyond the row of the drop
+    centre at the start (or end) of the exposure; averaged over the sub-pixel phase.
+    """
+    widths = np.geomspace(0.2, 60.0, 90)
+    phases = (np.arange(8) + 0.5) / 8
+    out = np.empty(widths.size)
+    for i, w in enumerate(widths):
+        r = 0.5 * w
+        length = 4.0 * w + 20.0
+        offs = []
+        for ph in phases:
+            n = int(length + 2 * w + 12)
+            rows = np.arange(n) - (w + 6) - ph          # row centre minus the top end
+            hi = _capsule_cumulative(rows + 0.5, 0.0, length, r)
+            lo = _capsule_cumulative(rows - 0.5, 0.0, length, r)
+            prof = np.convolve(hi - lo, np.ones(3) / 3.0, mode="same")
+            span = half_level_span(prof, 0.5 * float(np.median(prof[n // 3: 2 * n // 3])))
+            offs.append(-(rows[0] + span[0]))
+        out[i] = float(np.mean(offs))
+    return widths, out
+
+
+_CAP_TABLE = None
+
+
+def cap_offset_px(width_px) -> np.ndarray:
+    """Distance from a streak end's half-plateau crossing (3-row smoothed row sums) to the
+    row of the drop centre there [px], for a uniform streak of apparent width w [px].
+
+    ~ (sqrt(3)/4) w for wide streaks (the cap sqrt(1 - (d/r)^2) is at half height at
+    d = 0.87 r), less for narrow ones whose cap is spread by the pixel and the smoothing.
+    """
+    global _CAP_TABLE
+    if _CAP_TABLE is None:
+        _CAP_TABLE = _cap_offset_table()
+    w, off = _CAP_TABLE
+    return np.interp(np.asarray(width_px, dtype=float), w, off)
+
+
+def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarray, select, *,
+                         valid: np.ndarray | None = None, margin_px: int = 4,
+                         sigma_min: float = SHARP_SIGMA_PX, cur: np.ndarray | None = None,
+                         prev: np.ndarray | None = None, contrast=None, noise_sigma: float = 2.0) -> dict:
+    """Closed-form measurement of many uniform streaks at once (no iteration, no loop over streaks).
+
+    The same quantities as :class:`StreakProps` (``shape="uniform"``), from moments instead
+    of fits:
+
+    * axis and slope: first and second moments of the positive change of the streak's pixels;
+    * apparent width w': the second moment across the axis of the change on the plateau
+      rows, w' = sqrt(12 (var - 1/12 - s_min^2)) (a box of width w' has the variance
+      w'^2/12; the pixel's own box adds 1/12), the definition of ``width_apparent``
+      of :func:`fit_cross_profile`;
+    * ends: half-plateau crossings of the 3-row smoothed row sums, moved inwards by
+      :func:`cap_offset_px` (exact for a uniform streak, independent of noise on average);
+      motion = bottom - top;
+    * plateau: median of the row sums on the middle half of the streak.
+
+    Parameters
+    ----------
+    change : (M, N) float32 array, or (prev, cur, nxt)
+        I_n - (I_{n-1} + I_{n+1}) / 2 [gray levels], or the three linearised frames
+        (the change is then computed only under the streaks).
+    labels, stats : from :func:`detect_streaks`.
+    select : (K,) int array
+        Labels to measure.
+    valid : (n + 1,) bool array, optional
+        Which labels are streaks (masked out of each other's measurement).
+    cur, prev : (M, N) float32 arrays, optional
+        Frames n and n-1: mean background under each streak and the photometric slope of Eq. (18).
+    contrast : (float, float), optional
+        (E_r, C_ref): divide the change by the local contrast E_r - I_b and scale to C_ref
+        (Eq. 18), removing the background's texture from the profiles; needs ``cur``.
+    noise_sigma : float
+        Noise of the change [gray levels] (for ``chi2``).
+
+    Returns
+    -------
+    dict of (K,) arrays: ``label, xm, ym, slope, width_apparent, top, bottom, motion,
+    plateau, background_dn, beta, chi2`` (mean squared residual of the plateau rows
+    against the box of width w', in units of the noise: ~1 for a streak, large for the
+    two-signed changes of moving scenery), ``ok`` and the streaks' own pixels ``own_k, own_y, own_x``
+    (index into the K streaks, row, column).
+    """
+    L = np.asarray(select, dtype=np.int64)
+    K = L.size
+    M, N = labels.shape
+    empty = np.zeros(0)
+    if K == 0:
+        out = {k: empty for k in ("xm", "ym", "slope", "width_apparent", "top", "bottom", "motion",
+                                  "plateau", "background_dn", "beta", "chi2")}
+        out.update(ok=np.zeros(0, bool), label=L, own_k=L, own_y=L, own_x=L)
+        return out
+    if valid is None:
+        valid = stats[:, 4] > 0
+    x, y, w, h = (stats[L, k].astype(np.int64) for k in range(4))
+    m = int(margin_px)
+    mh = m + np.maximum(2, w // 2)
+    x0 = np.maximum(x - mh, 0)
+    x1 = np.minimum(x + w + mh, N)
+    y0 = np.maximum(y - m, 0)
+    y1 = np.minimum(y + h + m, M)
+    cw, ch = x1 - x0, y1 - y0
+    # every pixel of every crop, row by row (no division, no loop)
+    rstart = np.concatenate(([0], np.cumsum(ch)[:-1]))
+    R = int(ch.sum())
+    row_k = np.repeat(np.arange(K), ch)
+    row_l = np.arange(R) - rstart[row_k]
+    per_row = cw[row_k]
+    rkey = np.repeat(np.arange(R), per_row)
+    kk = row_k[rkey]
+    ly = row_l[rkey]
+    lx = np.arange(rkey.size) - np.concatenate(([0], np.cumsum(per_row)[:-1]))[rkey]
+    gy = y0[kk] + ly
+    gx = x0[kk] + lx
+    flat = gy * N + gx
+    lab = np.take(labels, flat)
+    cur_g = None if cur is None else np.take(cur, flat).astype(np.float64)
+    if isinstance(change, tuple):
+        p_, c_, n_ = change
+        cg = cur_g if c_ is cur and cur_g is not None else np.take(c_, flat).astype(np.float64)
+        img = cg - 0.5 * (np.take(p_, flat).astype(np.float64) + np.take(n_, flat))
+    else:
+        img = np.take(change, flat).astype(np.float64)
+    img0 = img
+    if contrast is not None and cur is not None:
+        e_r, c_ref = contrast
+        bgp = cur_g - img
+        img = img * (c_ref / np.maximum(e_r - bgp, 0.25 * c_ref))
+    own = lab == L[kk]
+    other = (lab != 0) & ~own & valid[lab]
+    # -- axis from the moments of the positive change on the streak's own pixels
+    wts = np.where(own, np.maximum(img, 0.0), 0.0)
+    fx, fy = lx.astype(np.float64), ly.astype(np.float64)
+    s0 = np.bincount(kk, wts, K)
+    sx = np.bincount(kk, wts * fx, K)
+    sy = np.bincount(kk, wts * fy, K)
+    safe = np.where(s0 > 0, s0, 1.0)
+    xm_l, ym_l = sx / safe, sy / safe
+    dy = fy - ym_l[kk]
+    myy = np.bincount(kk, wts * dy * dy, K) / safe
+    mxy = np.bincount(kk, wts * (fx - xm_l[kk]) * dy, K) / safe
+    slope = np.where(myy > 1e-9, mxy / np.where(myy > 1e-9, myy, 1.0), 0.0)
+    xm = np.where(s0 > 0, xm_l + x0, x + w / 2.0)
+    ym = np.where(s0 > 0, ym_l + y0, y + h / 2.0)
+    slope = np.where(s0 > 0, slope, 0.0)
+    # -- width of the detected pixels along a row
+    own_rows = np.bincount(rkey, own, R) > 0
+    n_rows = np.bincount(row_k, own_rows, K)
+    row_width = np.bincount(kk, own, K) / np.maximum(n_rows, 1)
+    # -- the band around the axis, row sums
+    centre = xm[kk] + slope[kk] * (gy - ym[kk])
+    off = gx - centre
+    half = 0.5 * row_width + 1.5 + m / 2
+    band = (np.abs(off) <= half[kk]) & ~other
+    row_sum = np.bincount(rkey, np.where(band, img, 0.0), R)
+    H = int(ch.max())
+    col = np.arange(R) - rstart[row_k]
+    S = np.zeros((K, H + 2))
+    S[row_k, col + 1] = row_sum
+    sm = (S[:, :-2] + S[:, 1:-1] + S[:, 2:]) / 3.0            # 3-row smoothing ('same', zero padded)
+    rows_g = y0[:, None] + np.arange(H)[None, :]
+    inside = np.arange(H)[None, :] < ch[:, None]
+    inner = inside & (rows_g >= (y + 0.25 * h)[:, None]) & (rows_g <= (y + 0.75 * h)[:, None])
+    few = inner.sum(axis=1) < 2
+    inner[few] = inside[few]
+    with np.errstate(all="ignore"):
+        plateau = np.nanmedian(np.where(inner, sm, np.nan), axis=1)
+    lvl = 0.5 * plateau
+    above = (sm >= lvl[:, None]) & inside
+    has = above.any(axis=1) & (plateau > 0)
+    i0 = np.argmax(above, axis=1)
+    i1 = H - 1 - np.argmax(above[:, ::-1], axis=1)
+    ar = np.arange(K)
+    with np.errstate(all="ignore"):
+        a_, b_ = sm[ar, np.maximum(i0 - 1, 0)], sm[ar, i0]
+        first = np.where(i0 > 0, i0 - 1 + np.where(b_ != a_, (lvl - a_) / (b_ - a_), 1.0), 0.0)
+        a_, b_ = sm[ar, i1], sm[ar, np.minimum(i1 + 1, H - 1)]
+        last = np.where(i1 < ch - 1, i1 + np.where(a_ != b_, (a_ - lvl) / (a_ - b_), 0.0), ch - 1.0)
+    top_r = first + y0
+    bot_r = last + y0
+    # -- cross profile on the plateau rows: second moment of the change across the axis
+    cos_t = 1.0 / np.sqrt(1.0 + slope ** 2)
+    w_guess = np.maximum(row_width * cos_t - 2.0, 1.0)
+    lo_r = top_r + 0.5 * w_guess + 1.0
+    hi_r = bot_r - 0.5 * w_guess - 1.0
+    gyf = gy.astype(np.float64)
+    sel = (gyf >= lo_r[kk]) & (gyf <= hi_r[kk])
+    nsel = np.bincount(rkey, sel & (lx == 0), R)
+    enough = np.bincount(row_k, nsel, K) >= 2
+    mid = 0.5 * (top_r + bot_r)
+    sel = np.where(enough[kk], sel, np.abs(gyf - mid[kk]) <= 1.0) & band
+    o = off * cos_t[kk]
+    n_cross = np.bincount(kk, sel, K)
+    # two passes: the whole band, then a window of w'/2 + 2 px about the centre (the far
+    # pixels only add noise to the second moment; the edges of a sharp or uniformly
+    # defocused streak end within 1 px of w'/2)
+    win = np.full(K, np.inf)
+    cen_o = np.zeros(K)
+    for _ in range(3):
+        use = sel & (np.abs(o - cen_o[kk]) <= win[kk])
+        v = np.where(use, img, 0.0)
+        c0 = np.bincount(kk, v, K)
+        c1 = np.bincount(kk, v * o, K)
+        c2 = np.bincount(kk, v * o * o, K)
+        with np.errstate(all="ignore"):
+            cen = c1 / c0
+            var = c2 / c0 - cen ** 2
+            w_app = np.sqrt(12.0 * np.maximum(var - 1.0 / 12.0 - sigma_min ** 2, 0.0))
+        good = np.isfinite(w_app) & (c0 > 0)
+        w_lim = np.clip(np.where(good, w_app, row_width * cos_t), 0.5 * row_width * cos_t - 1.0,
+                        row_width * cos_t + 2.0)
+        win = np.where(good, 0.5 * w_lim + 1.5, win)
+        cen_o = np.where(good, cen, cen_o)
+    ok = has & (c0 > 0) & (n_cross >= 6) & np.isfinite(w_app) & (w_app > 0)
+    # goodness of the uniform model: the change on the plateau rows against a box of width
+    # w' (pixel-integrated) holding the same total, per pixel in units of the noise
+    n_r = np.bincount(row_k, np.bincount(rkey, sel, R) > 0, K)
+    with np.errstate(all="ignore"):
+        amp = c0 / (np.maximum(n_r, 1) * w_app)
+        hw = 0.5 * w_app[kk]
+        u = o - cen[kk]
+        cover = np.clip(np.minimum(u + 0.5, hw) - np.maximum(u - 0.5, -hw), 0.0, None)
+        res = np.where(sel, img - amp[kk] * cover, 0.0)
+        chi2 = np.bincount(kk, res * res, K) / (np.maximum(n_cross, 1) * max(noise_sigma, 1e-3) ** 2)
+    cap = cap_offset_px(np.where(np.isfinite(w_app), w_app, 1.0))
+    top = top_r + cap
+    bot = bot_r - cap
+    motion = bot - top
+    # -- background and the photometric slope of Eq. (18) on the own pixels
+    bg_dn = np.full(K, np.nan)
+    beta = np.full(K, np.nan)
+    ok_k, oy, ox = kk[own], gy[own], gx[own]
+    if cur is not None:
+        c_own = cur_g[own]
+        raw_change = img0[own]
+        n_own = np.bincount(ok_k, minlength=K)
+        with np.errstate(all="ignore"):
+            bg_dn = np.bincount(ok_k, c_own - raw_change, K) / n_own
+        if prev is not None:
+            b = np.take(prev, flat[own]).astype(np.float64)
+            d = c_own - b
+            sb = np.bincount(ok_k, b, K)
+            sbb = np.bincount(ok_k, b * b, K)
+            sd = np.bincount(ok_k, d, K)
+            sbd = np.bincount(ok_k, b * d, K)
+            with np.errstate(all="ignore"):
+                n = np.maximum(n_own, 1)
+                vb = sbb / n - (sb / n) ** 2
+                cov = sbd / n - sb * sd / n ** 2
+                fit = (n_own >= 6) & (vb >= 16.0)
+                beta = np.where(fit, -cov / np.where(fit, vb, 1.0), np.nan)
+    return {"label": L, "xm": xm, "ym": ym, "slope": slope, "width_apparent": w_app, "top": top,
+            "bottom": bot, "motion": motion, "plateau": plateau, "background_dn": bg_dn, "beta": beta,
+            "chi2": chi2, "ok": ok, "own_k": ok_k, "own_y": oy, "own_x": ox}

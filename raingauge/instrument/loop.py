@@ -1,13 +1,23 @@
-"""The field instrument's loop: source -> linearisation -> gauge -> records -> outputs.
+"""The field instrument's loop: source -> gauge (linearisation inside) -> records -> outputs.
 
 ::
 
-    Grabber thread ──(t, frame)──> measuring loop ──record──> Modbus server thread (asyncio)
-    (reconnect, corrupt frames)    profile.linearize          ├──> serial writer thread (NMEA)
-                                   RainGauge.process          ├──> history writer thread (SQLite)
-                                   accumulation, status       └──> stdout (optional)
-                                        └──frames──> diagnostics thread (low rate: derained frames,
-                                                     needle map, advisor recommendation)
+    [renderer process]  simulated camera only: frames rendered ahead into shared memory
+          │
+    Grabber thread ──(t, frame)──> measuring loop ──record──> Modbus server process
+    (pacing, reconnect,            RainGauge.process          ├──> serial writer thread (NMEA)
+     corrupt and dropped           (8-bit frames in)          ├──> history writer thread (SQLite)
+     frames counted)               accumulation, status       └──> stdout (optional)
+                                        └──frames──> diagnostics process, SCHED_IDLE (low rate:
+                                                     derained frames, needle map, advisor)
+
+The gauge gets the camera's 8-bit frames and linearises them itself (one
+look-up); the loop adds no copy.  When the gauge is slower than a paced source
+(a camera, or a file or the simulated camera played in real time), the grabber
+drops frames explicitly (see :mod:`raingauge.instrument.sources`): every record
+carries ``dropped_frames`` (frames of its step that were not measured) and the
+quality flag ``dropped_frames``; the rate's sample time counts only the frames
+measured.  Unpaced sources (``--fast``) wait for the gauge instead.
 
 The measuring loop never waits for an output: every output has its own thread
 and queue, and ``publish`` returns at once.  A camera that vanishes clears the
@@ -30,7 +40,7 @@ import datetime as dt
 import json
 import logging
 import math
-import queue
+import os
 import shutil
 import threading
 import time
@@ -43,7 +53,8 @@ from firmware_interface.fields import (
     N_DSD_CLASSES, STATUS_BITS, intensity_code, iso_utc, record_defaults, status_word,
 )
 
-__all__ = ["Instrument", "Accumulator", "HistoryWriter", "Diagnostics", "instrument_record", "make_gauge"]
+__all__ = ["Instrument", "Accumulator", "HistoryWriter", "Diagnostics", "SnapshotWriter", "instrument_record",
+           "make_gauge"]
 
 log = logging.getLogger("raingauge.instrument")
 
@@ -229,19 +240,58 @@ class HistoryWriter:
             log.error("history: %d records could not be written before exit", self.pending())
 
 
-# ---------------------------------------------------------------------- diagnostics thread
-class Diagnostics:
-    """Low-rate diagnostics beside the gauge, on their own thread.
+# ---------------------------------------------------------------------- diagnostics process
+def _lower_priority() -> str:
+    """Run the calling process only on CPU time nobody else wants (SCHED_IDLE, else nice 19)."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+        return "SCHED_IDLE"
+    except (AttributeError, OSError):
+        try:
+            os.nice(19)
+            return "nice 19"
+        except OSError:
+            return "normal"
 
-    Each snapshot (a short stack of recent frames) gives, in
-    ``folder/YYYYmmddTHHMMSSZ/``: ``frame.png`` (the middle frame),
-    ``derained.png`` (rain removed, Sec. 5.2), ``needles.png`` (the needle map
-    of the rain dynamics, Fig. 11) and ``advice.json`` (the advisor's gauge
-    settings and the counting uncertainty at the current rate, Secs. 6-8).
-    Each part is guarded: a failure is logged and the others go on; nothing
-    here can stall or stop the gauge.  Only the newest ``keep`` snapshots are
-    kept.
-    """
+
+def _diagnostics_worker(folder, profile, keep, buf, shape, jobs, idle, count, log_level, priority) -> None:
+    """The diagnostics process: one snapshot per job, frames read from the shared buffer."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)      # Ctrl-C is the instrument's to handle
+    logging.basicConfig(level=log_level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    try:                                              # imports at start-up, at normal priority
+        import cv2  # noqa: F401
+
+        import raingauge.advisor  # noqa: F401
+        import raingauge.vision  # noqa: F401
+    except Exception:  # noqa: BLE001 - each snapshot part reports its own failure
+        pass
+    if priority == "idle":
+        _lower_priority()
+    writer = SnapshotWriter(folder, profile, keep=keep)
+    ring = np.frombuffer(buf, dtype=np.uint8).reshape(shape)
+    while True:
+        job = jobs.get()
+        if job is None:
+            return
+        n, time_unix, rate, window_s = job
+        try:
+            if writer.snapshot([ring[i] for i in range(n)], time_unix, rate, window_s) is not None:
+                with count.get_lock():
+                    count.value += 1
+        except Exception:  # noqa: BLE001 - never let the diagnostics process die
+            log.exception("diagnostics: snapshot failed")
+        finally:
+            idle.set()
+
+
+#: how the diagnostics process is scheduled: "idle" (only CPU time nobody else wants) or "normal"
+DIAGNOSTICS_PRIORITIES = ("idle", "normal")
+
+
+class SnapshotWriter:
+    """Write diagnostic snapshots (see :class:`Diagnostics`) on the calling thread."""
 
     def __init__(self, folder: str | Path, profile, *, keep: int = 24):
         self.folder = Path(folder)
@@ -249,25 +299,6 @@ class Diagnostics:
         self.keep = keep
         self.snapshots = 0
         self.failures: collections.Counter = collections.Counter()
-        self.busy = False
-        self._queue: queue.Queue = queue.Queue(maxsize=1)
-        self._thread = threading.Thread(target=self._run, name="diagnostics", daemon=True)
-        self._thread.start()
-
-    def submit(self, frames: list[np.ndarray], *, time_unix: float, rain_rate_mm_h: float, window_s: float) -> bool:
-        """Hand over a snapshot; dropped (False) when the previous one is still being worked on."""
-        try:
-            self._queue.put_nowait((list(frames), time_unix, rain_rate_mm_h, window_s))
-            return True
-        except queue.Full:
-            return False
-
-    def close(self) -> None:
-        try:
-            self._queue.put_nowait(None)
-        except queue.Full:
-            pass
-        self._thread.join(timeout=2.0)
 
     def _guard(self, what: str, fn: Callable[[], Any]):
         try:
@@ -281,25 +312,21 @@ class Diagnostics:
                 log.debug("diagnostics: %s failed again: %s", what, exc)
             return None
 
-    def _run(self) -> None:
-        while True:
-            item = self._queue.get()
-            if item is None:
-                return
-            self.busy = True
-            try:
-                self.snapshot(*item)
-            finally:
-                self.busy = False
-
     def snapshot(self, frames: list[np.ndarray], time_unix: float, rain_rate_mm_h: float, window_s: float) -> Path | None:
-        """Write one snapshot; return its folder (None when the folder cannot be made)."""
+        """Write one snapshot; return its folder (None when the folder cannot be made).
+
+        The snapshot is written into ``STAMP.part`` and renamed when complete, so
+        a folder without the suffix is never half written.
+        """
         import cv2
 
         stamp = dt.datetime.fromtimestamp(time_unix, tz=dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
-        out = self.folder / stamp
+        final = self.folder / stamp
+        out = self.folder / (stamp + ".part")
 
         def mkdir():
+            if out.exists():
+                shutil.rmtree(out)
             out.mkdir(parents=True, exist_ok=True)
             return out
 
@@ -337,14 +364,152 @@ class Diagnostics:
             (out / "advice.json").write_text(json.dumps(doc, indent=2, default=_json_default))
 
         self._guard("advisor", advice)
+
+        def publish():
+            if final.exists():
+                shutil.rmtree(final)
+            out.rename(final)
+            return final
+
+        if self._guard("complete snapshot", publish) is None:
+            return None
         self.snapshots += 1
         self._guard("prune old snapshots", self._prune)
-        return out
+        return final
 
     def _prune(self) -> None:
-        dirs = sorted(p for p in self.folder.iterdir() if p.is_dir())
+        dirs = sorted(p for p in self.folder.iterdir() if p.is_dir() and not p.name.endswith(".part"))
         for old in dirs[: max(0, len(dirs) - self.keep)]:
             shutil.rmtree(old, ignore_errors=True)
+        for part in self.folder.glob("*.part"):      # left by an interrupted snapshot
+            shutil.rmtree(part, ignore_errors=True)
+
+
+class Diagnostics:
+    """Low-rate diagnostics beside the gauge, in a separate low-priority process.
+
+    Each snapshot (a short stack of recent frames) gives, in
+    ``folder/YYYYmmddTHHMMSSZ/``: ``frame.png`` (the middle frame),
+    ``derained.png`` (rain removed, Sec. 5.2), ``needles.png`` (the needle map
+    of the rain dynamics, Fig. 11) and ``advice.json`` (the advisor's gauge
+    settings and the counting uncertainty at the current rate, Secs. 6-8).
+    Each part is guarded: a failure is logged and the others go on.  Only the
+    newest ``keep`` snapshots are kept.
+
+    The work runs in its own process (started at the first :meth:`submit`)
+    scheduled ``SCHED_IDLE`` (else ``nice 19``): it gets only CPU time the
+    gauge and the camera leave, so it cannot slow the gauge, and with the GIL
+    of another interpreter it cannot hold the gauge's thread either.  The
+    frames travel through a shared-memory buffer (one copy, a few ms, once per
+    snapshot); a snapshot is handed over only when the previous one is done.
+    :meth:`snapshot` writes one on the calling thread (tools, tests).
+    """
+
+    def __init__(self, folder: str | Path, profile, *, keep: int = 24, close_timeout_s: float = 2.0,
+                 priority: str = "idle"):
+        if priority not in DIAGNOSTICS_PRIORITIES:
+            raise ValueError(f"unknown diagnostics priority {priority!r}; valid: {list(DIAGNOSTICS_PRIORITIES)}")
+        self.priority = priority
+        self.folder = Path(folder)
+        self.profile = profile
+        self.keep = keep
+        self.close_timeout_s = float(close_timeout_s)
+        self._writer = SnapshotWriter(folder, profile, keep=keep)
+        self._proc = None
+        self._ring = None
+        self._jobs = None
+        self._idle = None
+        self._count = None
+        self.submitted = 0
+        self.skipped = 0
+
+    @property
+    def failures(self) -> collections.Counter:
+        """Failures of the snapshots written by :meth:`snapshot` (the process logs its own)."""
+        return self._writer.failures
+
+    @property
+    def snapshots(self) -> int:
+        """Snapshots completed (in the process and by :meth:`snapshot`)."""
+        done = 0 if self._count is None else int(self._count.value)
+        return done + self._writer.snapshots
+
+    @property
+    def busy(self) -> bool:
+        return self._idle is not None and not self._idle.is_set()
+
+    @property
+    def pid(self) -> int | None:
+        """Process id of the diagnostics process (None before :meth:`start`)."""
+        return None if self._proc is None else self._proc.pid
+
+    def start(self, shape: tuple[int, ...]) -> "Diagnostics":
+        """Start the process for snapshots of up to ``shape`` = (T, M, N) uint8 frames.
+
+        Called by the instrument at start-up (the process's imports then do not
+        compete with measurement); :meth:`submit` starts it when needed.
+        """
+        self._start(tuple(int(v) for v in shape))
+        return self
+
+    def _start(self, shape: tuple[int, ...]) -> None:
+        import multiprocessing as mp
+
+        self.close()
+        ctx = mp.get_context("spawn")          # never fork a process with threads
+        buf = ctx.RawArray("B", int(np.prod(shape)))
+        self._ring = np.frombuffer(buf, dtype=np.uint8).reshape(shape)
+        self._jobs = ctx.Queue()
+        self._idle = ctx.Event()
+        self._idle.set()
+        self._count = ctx.Value("i", 0)
+        self._proc = ctx.Process(target=_diagnostics_worker, name="raingauge-diagnostics", daemon=True,
+                                 args=(self.folder, self.profile, self.keep, buf, shape, self._jobs, self._idle,
+                                       self._count, logging.getLogger().getEffectiveLevel(), self.priority))
+        self._proc.start()
+
+    def submit(self, frames: list[np.ndarray], *, time_unix: float, rain_rate_mm_h: float, window_s: float) -> bool:
+        """Hand over a snapshot; dropped (False) when the previous one is still being worked on."""
+        frames = [np.asarray(f) for f in frames]
+        if not frames or frames[0].dtype != np.uint8 or any(f.shape != frames[0].shape for f in frames):
+            self.skipped += 1
+            return False
+        shape = (len(frames),) + frames[0].shape
+        if self._proc is None or self._ring.shape[1:] != shape[1:] or self._ring.shape[0] < shape[0]:
+            self._start(shape)
+        if not self._proc.is_alive():
+            log.error("diagnostics process ended (exit code %s); starting it again", self._proc.exitcode)
+            self._start(shape)
+        if not self._idle.is_set():
+            self.skipped += 1
+            return False
+        self._idle.clear()
+        for i, f in enumerate(frames):
+            self._ring[i] = f
+        self._jobs.put((len(frames), float(time_unix), float(rain_rate_mm_h), float(window_s)))
+        self.submitted += 1
+        return True
+
+    def snapshot(self, frames: list[np.ndarray], time_unix: float, rain_rate_mm_h: float, window_s: float) -> Path | None:
+        """Write one snapshot on the calling thread; return its folder (see :class:`SnapshotWriter`)."""
+        return self._writer.snapshot(frames, time_unix, rain_rate_mm_h, window_s)
+
+    def close(self) -> None:
+        """Let a snapshot in progress finish (up to ``close_timeout_s``), then stop the process."""
+        proc, self._proc = self._proc, None
+        if proc is None:
+            return
+        try:
+            self._jobs.put(None)
+        except (OSError, ValueError):
+            pass
+        proc.join(timeout=self.close_timeout_s)
+        if proc.is_alive():
+            log.info("diagnostics: a snapshot was still in progress at exit; stopped")
+            proc.terminate()
+            proc.join(timeout=2.0)
+        self._jobs.close()
+        self._jobs.cancel_join_thread()
 
 
 def _json_default(o):
@@ -406,6 +571,12 @@ class Instrument:
         self.records = 0
         self.missing_records = 0
         self.frames = 0
+        self.gauge_time_s = 0.0
+        self.wall_time_s = 0.0
+        self.measuring_fps: float | None = None
+        self._first_frame_wall: float | None = None
+        self._dropped_seen = 0
+        self._dropped_in_step = 0
         self.output_errors = 0
         self.gauge_errors = 0
         self._stop = threading.Event()
@@ -472,9 +643,17 @@ class Instrument:
             acc, dur = state["accumulation_mm"], state["rain_duration_s"]
         rec["accumulation_mm"] = acc
         rec["rain_duration_s"] = dur
+        self._count_dropped()
         rec["frames"] = self._frames_in_step
+        rec["dropped_frames"] = self._dropped_in_step
+        if self._dropped_in_step and not rec.get("missing"):
+            quality = list(rec.get("quality") or [])
+            if "dropped_frames" not in quality:
+                quality.append("dropped_frames")
+            rec["quality"] = quality
         rec["corrupt_frames"] = self.grabber.corrupt_frames + self.grabber.source_corrupt_frames
         self._frames_in_step = 0
+        self._dropped_in_step = 0
         rec["status"] = self.status(rec)
         self._last_status = self._published_status = rec["status"]
         if _finite(rec.get("time_unix")):
@@ -497,6 +676,12 @@ class Instrument:
                 self.on_record(rec)
             except Exception:  # noqa: BLE001
                 log.exception("record callback failed")
+
+    def _count_dropped(self) -> None:
+        """Move the grabber's newly dropped frames into the current step's count."""
+        d = int(getattr(self.grabber, "dropped_frames", 0) or 0)
+        self._dropped_in_step += max(0, d - self._dropped_seen)
+        self._dropped_seen = d
 
     def _emit_gauge_records(self, records: list[dict]) -> None:
         for g in records:
@@ -550,6 +735,12 @@ class Instrument:
         Returns a summary (records, frames, missing records, corrupt frames, ...).
         """
         g = self.grabber
+        wall0 = time.monotonic()
+        if self.diagnostics is not None and self.diagnostics.pid is None:
+            try:
+                self.diagnostics.start((self._ring.maxlen,) + tuple(self.profile.shape))
+            except Exception:  # noqa: BLE001 - the gauge runs without diagnostics
+                log.exception("diagnostics cannot start; measuring without them")
         g.start()
         lost = False
         last_frame_wall = time.monotonic()
@@ -588,15 +779,19 @@ class Instrument:
                     lost = False
                     self._new_gauge(t_s if self.frames else 0.0)
                 self._set_camera(True)
-                lin = self.profile.linearize(frame)
+                self._count_dropped()
+                t_gauge = time.perf_counter()
                 try:
-                    records = self._gauge.process(lin, t_s=t_s)
+                    records = self._gauge.process(frame, t_s=t_s)
                 except Exception:  # noqa: BLE001 - one bad frame must not end months of measuring
                     self.gauge_errors += 1
                     if self.gauge_errors == 1 or self.gauge_errors % 1000 == 0:
                         log.exception("gauge failed on a frame at t = %.2f s (%d so far); frame skipped",
                                       t_s, self.gauge_errors)
                     records = []
+                self.gauge_time_s += time.perf_counter() - t_gauge
+                if self._first_frame_wall is None:
+                    self._first_frame_wall = time.monotonic()
                 self.frames += 1
                 self._frames_in_step += 1
                 self._ring.append(frame)
@@ -607,6 +802,10 @@ class Instrument:
                     self.diagnostics.submit(list(self._ring), time_unix=self.wall_t0 + t_s,
                                             rain_rate_mm_h=self._last_rate(), window_s=self.window_s)
         finally:
+            t_end = time.monotonic()
+            self.wall_time_s = t_end - wall0
+            if self._first_frame_wall is not None and self.frames > 1:
+                self.measuring_fps = (self.frames - 1) / max(t_end - self._first_frame_wall, 1e-9)
             self._finish()
         return self.summary()
 
@@ -641,6 +840,10 @@ class Instrument:
             "records": self.records,
             "missing_records": self.missing_records,
             "frames": self.frames,
+            "dropped_frames": int(getattr(self.grabber, "dropped_frames", 0) or 0),
+            "wall_s": round(self.wall_time_s, 1),
+            "frames_per_s": None if self.measuring_fps is None else round(self.measuring_fps, 1),
+            "gauge_ms_per_frame": round(1e3 * self.gauge_time_s / self.frames, 1) if self.frames else None,
             "corrupt_frames": self.grabber.corrupt_frames + self.grabber.source_corrupt_frames,
             "reconnects": self.grabber.reconnects,
             "gauge_errors": self.gauge_errors,

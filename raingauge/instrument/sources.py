@@ -10,8 +10,20 @@ for ever, chunk after chunk.
 :class:`Grabber` runs a source on its own thread, reconnects with exponential
 backoff when it is lost, skips and counts corrupt frames (empty, wrong size or
 type), and hands ``(t_s, frame)`` pairs to the measuring loop through a small
-queue: a live camera drops the oldest frame when the loop falls behind (as a
-camera's driver does), a recorded or simulated source waits (nothing is lost).
+queue.
+
+When the measuring loop falls behind, what happens depends on the source's clock:
+
+* *paced* sources - live cameras and streams, and recorded or simulated sources
+  played in real time (``realtime=True``) - go on at their frame rate as a
+  camera does: when the queue is full the oldest queued frame is dropped
+  **explicitly**.  :attr:`Grabber.dropped_frames` counts them, the frames kept
+  carry their true times (so the gauge sees the gaps, flags its records
+  ``dropped_frames`` and takes as sample time only the frames it measured), and
+  the instrument reports the count in every record.  The lag between camera and
+  gauge stays bounded by the queue (``queue_size`` frames).
+* unpaced sources (files or simulation with ``realtime=False``) wait for the
+  loop: nothing is dropped, and source time runs slower than the wall clock.
 
 Specifications accepted by :func:`open_source`::
 
@@ -172,23 +184,76 @@ class FileSource(FrameSource):
         self._iter = None
 
 
+def _ignore_interrupts() -> None:
+    """Worker processes leave Ctrl-C to the instrument (which stops them in order)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _render_worker(profile, rain_rate_mm_h: float, seed: int, chunk_s: float, buf, n_slots: int,
+                   free_slots, ready) -> None:
+    """Renderer process of :class:`SimulatedSource`: render frames into a shared ring of slots.
+
+    Takes a free slot index from ``free_slots`` (None: stop), renders the next
+    frame into it and puts the slot index on ``ready``; an exception is sent as
+    ``("error", text)``.
+    """
+    import traceback
+
+    _ignore_interrupts()
+    ready.cancel_join_thread()
+    try:
+        from raingauge.render.simulator import simulate
+
+        ring = np.frombuffer(buf, dtype=np.uint8).reshape((n_slots,) + tuple(profile.shape))
+        k = 0
+        while True:
+            sim = simulate(profile, seconds=chunk_s, rain_rate_mm_h=rain_rate_mm_h, seed=seed + k,
+                           truth_drops=False)
+            for item in sim:
+                frame = item[0] if isinstance(item, tuple) else item
+                slot = free_slots.get()
+                if slot is None:
+                    return
+                ring[slot] = frame
+                ready.put(slot)
+            k += 1
+    except Exception:  # noqa: BLE001 - reported to the instrument, which ends the source
+        ready.put(("error", traceback.format_exc()))
+
+
 class SimulatedSource(FrameSource):
     """The built-in simulated camera: :func:`raingauge.render.simulator.simulate` at a fixed rate.
+
+    The frames are rendered ahead in a separate process (``process=True``)
+    into a ring of ``prefetch`` shared-memory slots, so that rendering runs on
+    another core than the gauge; :meth:`read` copies the next frame out and
+    frees its slot.  The rain is continuous over ``chunk_s`` seconds; each
+    following chunk starts new rain with the next seed.
 
     Parameters
     ----------
     rain_rate_mm_h : [mm/h] rain rate of the simulated rain
     profile : the camera profile rendered (its size may be reduced by ``size``)
-    realtime : pace at the profile's frame rate (True) or as fast as possible
-    chunk_s : [s] seconds of rain rendered per call of the simulator
+    realtime : paced at the profile's frame rate like a camera (True: frames the
+        gauge cannot take in time are dropped and counted, see :class:`Grabber`)
+        or as fast as possible, nothing dropped (False)
+    chunk_s : [s] seconds of continuous rain per call of the simulator
     seed : random seed of the first chunk (the next chunks use seed + 1, ...)
     limit_frames : stop after this many frames (None: for ever)
+    process : render in a separate process (True) or on the calling thread
+    prefetch : frames rendered ahead (slots of the shared ring)
+    start_timeout_s : [s] longest wait for the renderer's first frame
     """
 
-    def __init__(self, rain_rate_mm_h: float, profile, *, realtime: bool = True, chunk_s: float = 10.0,
-                 seed: int = 0, limit_frames: int | None = None):
+    def __init__(self, rain_rate_mm_h: float, profile, *, realtime: bool = True, chunk_s: float = 3600.0,
+                 seed: int = 0, limit_frames: int | None = None, process: bool = True, prefetch: int = 6,
+                 start_timeout_s: float = 120.0):
         if not (rain_rate_mm_h >= 0 and np.isfinite(rain_rate_mm_h)):
             raise InputError(f"simulate:{rain_rate_mm_h}: the rain rate must be >= 0 mm/h. Fix: e.g. simulate:10")
+        if int(prefetch) < 1:
+            raise InputError(f"prefetch = {prefetch}: at least one frame must be rendered ahead. Fix: prefetch=6")
         self.rain_rate_mm_h = float(rain_rate_mm_h)
         self.profile = profile
         self.name = f"simulated camera at {rain_rate_mm_h:g} mm/h"
@@ -197,32 +262,119 @@ class SimulatedSource(FrameSource):
         self.chunk_s = chunk_s
         self.seed = seed
         self.limit_frames = limit_frames
+        self.process = bool(process)
+        self.prefetch = int(prefetch)
+        self.start_timeout_s = float(start_timeout_s)
         self._gen: Iterator | None = None
         self._count = 0
+        self._proc = None
+        self._ring = None
+        self._free = None
+        self._ready = None
+        self._first: np.ndarray | None = None
 
+    # ------------------------------------------------------------------ in-process rendering
     def _frames(self) -> Iterator[np.ndarray]:
         from raingauge.render.simulator import simulate
 
         k = 0
         while True:
             sim = simulate(self.profile, seconds=self.chunk_s, rain_rate_mm_h=self.rain_rate_mm_h,
-                           seed=self.seed + k)
+                           seed=self.seed + k, truth_drops=False)
             for item in sim:
                 frame = item[0] if isinstance(item, tuple) else item
                 yield frame
             k += 1
 
+    # ------------------------------------------------------------------ renderer process
+    def _start_process(self) -> None:
+        import multiprocessing as mp
+
+        ctx = mp.get_context("spawn")          # the instrument has threads: never fork it
+        shape = tuple(self.profile.shape)
+        buf = ctx.RawArray("B", self.prefetch * shape[0] * shape[1])
+        self._ring = np.frombuffer(buf, dtype=np.uint8).reshape((self.prefetch,) + shape)
+        self._free = ctx.Queue()
+        self._ready = ctx.Queue()
+        for slot in range(self.prefetch):
+            self._free.put(slot)
+        self._proc = ctx.Process(target=_render_worker, name="raingauge-simulated-camera", daemon=True,
+                                 args=(self.profile, self.rain_rate_mm_h, self.seed, self.chunk_s, buf,
+                                       self.prefetch, self._free, self._ready))
+        self._proc.start()
+
+    def _next_from_process(self, timeout_s: float) -> np.ndarray | None:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                item = self._ready.get(timeout=0.5)
+                break
+            except queue.Empty:
+                if not self._proc.is_alive():
+                    raise SourceError(f"{self.name}: the renderer process ended (exit code "
+                                      f"{self._proc.exitcode})") from None
+                if time.monotonic() > deadline:
+                    raise SourceError(f"{self.name}: no frame from the renderer in {timeout_s:.0f} s") from None
+        if isinstance(item, tuple):
+            raise RuntimeError(f"{self.name}: the simulator failed:\n{item[1]}")
+        frame = self._ring[item].copy()
+        self._free.put(item)
+        return frame
+
     def open(self) -> None:
-        self._gen = self._frames()
         self._count = 0
+        if not self.process:
+            self._gen = self._frames()
+            return
+        self.close()
+        self._start_process()
+        try:
+            # the first frame (imports, first chunk) before the source counts as started
+            self._first = self._next_from_process(self.start_timeout_s)
+        except Exception:
+            self.close()
+            raise
 
     def read(self) -> np.ndarray | None:
-        if self._gen is None:
-            raise SourceError(f"{self.name}: not open")
         if self.limit_frames is not None and self._count >= self.limit_frames:
             return None
+        if not self.process:
+            if self._gen is None:
+                raise SourceError(f"{self.name}: not open")
+            self._count += 1
+            return next(self._gen)
+        if self._proc is None:
+            raise SourceError(f"{self.name}: not open")
+        if self._first is not None:
+            frame, self._first = self._first, None
+        else:
+            try:
+                frame = self._next_from_process(30.0)
+            except RuntimeError as exc:
+                log.error("%s", exc)
+                return None                    # the simulation cannot go on: the source ends
         self._count += 1
-        return next(self._gen)
+        return frame
+
+    def close(self) -> None:
+        self._gen = None
+        proc, self._proc = self._proc, None
+        if proc is None:
+            return
+        try:
+            self._free.put(None)
+        except (OSError, ValueError):
+            pass
+        proc.join(timeout=2.0)
+        if proc.is_alive():
+            proc.terminate()
+            proc.join(timeout=2.0)
+        for q in (self._free, self._ready):
+            q.close()
+            q.cancel_join_thread()
+        self._free = self._ready = None
+        self._ring = None
+        self._first = None
 
 
 def scaled_profile(profile, width_px: int, height_px: int):
@@ -277,11 +429,15 @@ class Grabber:
     connected : the source is delivering
     corrupt_frames : frames skipped as unreadable or of the wrong size
     reconnects : successful reconnections after a loss
+    dropped_frames : frames of a paced source dropped because the loop was behind
+    clock_slip_s : [s] how far a paced recorded source fell behind the wall clock
     finished : a recorded source reached its end
     """
 
     def __init__(self, source: FrameSource, *, shape: tuple[int, int] | None = None,
                  backoff_s: tuple[float, float] = (0.5, 60.0), queue_size: int = 8):
+        if int(queue_size) < 1:
+            raise InputError(f"queue_size = {queue_size}: the frame queue needs at least one place. Fix: 8")
         self.source = source
         self.shape = shape
         self.backoff_s = backoff_s
@@ -295,7 +451,11 @@ class Grabber:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="grabber", daemon=True)
         self._t0 = 0.0
+        self._pace_t0: float | None = None
+        self.clock_slip_s = 0.0
         self._warned_shape = False
+        self._warned_drop = False
+        self._warned_slow = False
 
     def start(self) -> "Grabber":
         self._t0 = time.monotonic()
@@ -337,7 +497,7 @@ class Grabber:
         return frame
 
     def _put(self, item) -> None:
-        if self.source.live:
+        if self.paced:
             while True:
                 try:
                     self.queue.put_nowait(item)
@@ -345,15 +505,42 @@ class Grabber:
                 except queue.Full:
                     try:
                         self.queue.get_nowait()
-                        self.dropped_frames += 1
                     except queue.Empty:
-                        pass
+                        continue
+                    self.dropped_frames += 1
+                    if not self._warned_drop:
+                        self._warned_drop = True
+                        log.warning("%s: the gauge is slower than the camera's %g frames/s; frames it cannot "
+                                    "take are dropped, counted and flagged (dropped_frames)",
+                                    self.source.name, self.source.frame_rate_hz)
         while not self._stop.is_set():
             try:
                 self.queue.put(item, timeout=0.2)
                 return
             except queue.Full:
                 continue
+
+    def _pace(self, t: float) -> None:
+        """Hold a recorded frame until its time ``t`` [s] on the wall clock.
+
+        The clock starts with the first frame (start-up is not counted).  A
+        source that cannot produce frames in real time (a renderer slower than
+        the frame rate) slips: its clock is moved on rather than bursting to
+        catch up, and this is logged once.
+        """
+        now = time.monotonic()
+        if self._pace_t0 is None:
+            self._pace_t0 = now - t
+        wait = self._pace_t0 + t - now
+        if wait > 0:
+            self._stop.wait(wait)
+        elif wait < -0.5:
+            self._pace_t0 -= wait
+            self.clock_slip_s -= wait
+            if not self._warned_slow:
+                self._warned_slow = True
+                log.warning("%s delivers frames slower than %g frames/s: its clock slips behind the wall "
+                            "clock (nothing is dropped for it)", self.source.name, self.source.frame_rate_hz)
 
     def _run(self) -> None:
         src = self.source
@@ -413,11 +600,14 @@ class Grabber:
                 self.corrupt_frames += 1
                 continue
             if not src.live and src.realtime:
-                wait = self._t0 + t - time.monotonic()
-                if wait > 0:
-                    self._stop.wait(wait)
+                self._pace(t)
             self._put((t, checked))
         self.connected = False
+
+    @property
+    def paced(self) -> bool:
+        """The source runs on its own clock (camera, stream, or played in real time)."""
+        return bool(self.source.live or self.source.realtime)
 
     @property
     def source_corrupt_frames(self) -> int:

@@ -13,7 +13,8 @@ that ``aligned(x) = moving(M x)`` (OpenCV's ``WARP_INVERSE_MAP`` convention).
 Motion models form a registry, :data:`MOTION_MODELS`:
 
 ``none``         the camera is static.
-``translation``  phase correlation [Kuglin1975] on a reduced image: pans, tilts, jitter.
+``translation``  phase correlation [Kuglin1975] on a central crop, refined by Gauss-Newton
+                 [Lucas1981]: pans, tilts, jitter.
 ``euclidean``    ECC maximisation [Evangelidis2008] (rotation + translation), seeded by
                  phase correlation and kept only when it aligns better: a mast
                  that shakes and twists.
@@ -66,13 +67,48 @@ def _reduce(frame: np.ndarray, width: int) -> tuple[np.ndarray, float]:
     return np.array(frame[y0:y0 + ch, x0:x0 + cw], dtype=np.float32, copy=True), 1.0
 
 
+def _refine_translation(ref: np.ndarray, mov: np.ndarray, dx: float, dy: float, *, iterations: int = 8,
+                        tol_px: float = 2e-3) -> tuple[float, float]:
+    """Gauss-Newton refinement of a translation [Lucas1981]: ``mov(x + d) ~ ref(x)`` in least squares.
+
+    Forward-additive form: each iteration warps ``mov`` by the current shift
+    (bicubic, Keys' a = -0.5, exact on ramps) and linearises it with its own
+    gradient; intensities are taken about their means, so a change of
+    exposure does not bias the shift.
+    """
+    import cv2
+
+    h, w = ref.shape
+    m = max(4, int(math.ceil(max(abs(dx), abs(dy)))) + 3)
+    if h <= 2 * m + 8 or w <= 2 * m + 8:
+        return dx, dy
+    inner = (slice(m, h - m), slice(m, w - m))
+    r = ref[inner]
+    r = r - np.float32(r.mean())
+    for _ in range(iterations):
+        full = _translate_cubic(mov, dx, dy, a=-0.5)
+        warped = full[inner]
+        e = warped - np.float32(warped.mean()) - r
+        gx = cv2.Sobel(full, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)[inner]
+        gy = cv2.Sobel(full, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)[inner]
+        H = np.array([[np.vdot(gx, gx), np.vdot(gx, gy)], [np.vdot(gx, gy), np.vdot(gy, gy)]], np.float64)
+        if not np.linalg.det(H) > 1e-9 * max(H[0, 0] * H[1, 1], 1e-30):
+            break
+        b = np.array([np.vdot(gx, e), np.vdot(gy, e)], np.float64)
+        step = -np.linalg.solve(H, b)
+        dx, dy = dx + float(step[0]), dy + float(step[1])
+        if max(abs(step[0]), abs(step[1])) < tol_px:
+            break
+    return dx, dy
+
+
 def _phase_translation(ref_small: np.ndarray, mov_small: np.ndarray, window: np.ndarray,
                        min_response: float, refine: bool = True) -> tuple[float, float, float]:
-    """Phase correlation [Kuglin1975], refined by ECC [Evangelidis2008] on the same crop.
+    """Phase correlation [Kuglin1975], refined by Gauss-Newton [Lucas1981] on the same crop.
 
     The sub-pixel peak of phase correlation is biased by a few tenths of a
-    pixel on smooth scenes; a few ECC iterations seeded by it bring the error
-    to a few hundredths, which the three-frame test needs.
+    pixel on smooth scenes; a few Gauss-Newton iterations seeded by it bring
+    the error to a few hundredths, which the three-frame test needs.
     """
     import cv2
 
@@ -83,15 +119,9 @@ def _phase_translation(ref_small: np.ndarray, mov_small: np.ndarray, window: np.
         return 0.0, 0.0, float(response)
     if refine and max(abs(dx), abs(dy)) >= 0.5 * WARP_MIN_SHIFT_PX:
         # (a static camera needs no refinement: its frames are not warped)
-        W = np.array([[1, 0, dx], [0, 1, dy]], dtype=np.float32)
-        try:
-            _, W = cv2.findTransformECC(ref_small, mov_small, W, cv2.MOTION_TRANSLATION,
-                                        (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 1e-4), None, 1)
-            rx, ry = float(W[0, 2]), float(W[1, 2])
-            if math.isfinite(rx) and math.isfinite(ry) and abs(rx - dx) < 2 and abs(ry - dy) < 2:
-                dx, dy = rx, ry
-        except cv2.error:
-            pass
+        rx, ry = _refine_translation(ref_small, mov_small, dx, dy)
+        if math.isfinite(rx) and math.isfinite(ry) and abs(rx - dx) < 2 and abs(ry - dy) < 2:
+            dx, dy = rx, ry
     return float(dx), float(dy), float(response)
 
 
@@ -167,8 +197,13 @@ def transform_magnitude_px(M: np.ndarray, shape: tuple[int, int]) -> float:
     return float(np.max(np.hypot(*(moved - corners[:2]))))
 
 
-def _cubic_weights(t: float, a: float = -0.75) -> np.ndarray:
-    """Cubic-convolution weights [Keys1981] (OpenCV's a = -0.75) of the samples at -1, 0, 1, 2 for offset t."""
+def _cubic_weights(t: float, a: float = -0.5) -> np.ndarray:
+    """Cubic-convolution weights [Keys1981] of the samples at -1, 0, 1, 2 for offset t.
+
+    a = -0.5 (Keys' choice) reproduces quadratics exactly; OpenCV's a = -0.75
+    does not even reproduce a ramp, and moves it by up to 0.04 px, which
+    biases the sub-pixel registration.
+    """
     def k(x):
         x = abs(x)
         if x <= 1.0:
@@ -177,12 +212,15 @@ def _cubic_weights(t: float, a: float = -0.75) -> np.ndarray:
     return np.array([k(1.0 + t), k(t), k(1.0 - t), k(2.0 - t)], dtype=np.float32)
 
 
-def _translate_cubic(src: np.ndarray, dx: float, dy: float) -> np.ndarray:
+def _translate_cubic(src: np.ndarray, dx: float, dy: float, *, a: float = -0.75) -> np.ndarray:
     """``out(x, y) = src(x + dx, y + dy)``, bicubic, replicated border: the translation case of warp_to.
 
-    A whole-pixel shift (a slice of a padded copy) and a separable 4-tap
-    filter for the fraction: the same cubic convolution as ``cv2.warpAffine``
-    with ``INTER_CUBIC``, at a fraction of its cost.
+    A separable 4-tap filter for the fraction and a whole-pixel shift (a
+    slice, the uncovered side replicated): the cubic convolution of
+    ``cv2.warpAffine`` with ``INTER_CUBIC`` (a = -0.75, the sharper kernel,
+    used to align neighbours for the three-frame test) at a fraction of its
+    cost and with an exact fraction (OpenCV quantises it to 1/32 px).
+    Registration uses a = -0.5, which moves a ramp exactly.
     """
     import cv2
 
@@ -191,8 +229,8 @@ def _translate_cubic(src: np.ndarray, dx: float, dy: float) -> np.ndarray:
     if abs(ix) >= w - 1 or abs(iy) >= h - 1:
         return cv2.warpAffine(src, np.array([[1, 0, dx], [0, 1, dy]]), (w, h),
                               flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
-    kx = _cubic_weights(dx - ix)
-    ky = _cubic_weights(dy - iy)
+    kx = _cubic_weights(dx - ix, a)
+    ky = _cubic_weights(dy - iy, a)
     # the fraction: dst(x) = sum_j k[j] src(x + j - 1), anchor 1 puts the weights on offsets -1..2
     frac = cv2.sepFilter2D(src, cv2.CV_32F, kx, ky, anchor=(1, 1), borderType=cv2.BORDER_REPLICATE)
     # the whole pixels: a slice, the uncovered side replicated
