@@ -181,3 +181,34 @@ def test_quality_flags_lens_and_motion():
         g, recs = _run(frames, window_s=1.0, step_s=1.0)
         flags = set().union(*[r["quality"] for r in recs])
         assert (flag in flags) == expected, (flag, expected, flags)
+
+
+def test_low_contrast_interval_says_so():
+    """Drops barely brighter than a mid-gray background in 3 gray levels of noise are mostly
+    lost: the record says so (``low_contrast``, the smallest drop it can see) and its 95 %
+    interval is widened by the share of the rate such drops may carry, so it still covers
+    the truth instead of confidently reading low."""
+    sim = pytest.importorskip("raingauge.render.simulator")
+    cam = CAM.replace(noise_sigma_dn=3.0)
+    frames, truth = sim.render_clip(cam, seconds=3.0, rain_rate_mm_h=30.0, background="uniform:112",
+                                    drop_brightness_dn=200.0, seed=5)
+    rec = _run_cam(cam, frames, window_s=3.0, step_s=3.0)[-1]
+    true_rate = truth["rain_rate_mm_h"]
+    lo, hi = rec["rain_rate_ci95_mm_h"]
+    assert "low_contrast" in rec["quality"]
+    assert lo <= true_rate <= hi and hi > 3.0 * rec["rain_rate_mm_h"]
+    assert rec["min_detectable_diameter_mm"] > 1.0
+    # a dark background in the same noise: every measurable size is seen, no widening
+    frames, truth = sim.render_clip(cam, seconds=1.0, rain_rate_mm_h=30.0, background="uniform:40",
+                                    drop_brightness_dn=200.0, seed=5)
+    rec = _run_cam(cam, frames, window_s=1.0, step_s=1.0)[-1]
+    assert rec["min_detectable_diameter_mm"] < 0.5
+    assert "low_contrast" not in rec["quality"]
+
+
+def _run_cam(cam, frames, **kw):
+    g = RainGauge(cam, velocity_model="gunn_kinzer", **kw)
+    recs = []
+    for fr in frames:
+        recs += g.process(fr)
+    return recs + g.flush()

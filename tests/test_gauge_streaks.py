@@ -163,3 +163,85 @@ def test_equations_invert_eq26():
     assert radius_from_width_m(w, 2.5, focal_length_px=f) == pytest.approx(1.2e-3)
     L = f * 5.0 * CAM.exposure_s / 2.5 + w
     assert velocity_from_length_m_s(L, w, 2.5, focal_length_px=f, exposure_s=CAM.exposure_s) == pytest.approx(5.0)
+
+
+@pytest.mark.parametrize("a_mm, v, z", [(1.0, 4.4, 2.5), (2.0, 6.5, 2.45), (0.6, 2.5, 2.55)])
+def test_closed_form_table_recovers_a_and_v(a_mm, v, z):
+    """The gauge's closed-form measurement (moments, box width, end crossings; all streaks at
+    once) gives a and v of focused drops as well as the fits: same tolerances as above."""
+    from raingauge.gauge.streaks import measure_streak_table
+
+    rng = np.random.default_rng(int(a_mm * 10) + 7)
+    f, T = CAM.focal_length_px, CAM.exposure_s
+    w = 2 * f * a_mm * 1e-3 / z
+    motion = f * v * T / z
+    errs_a, errs_v = [], []
+    for k in range(6):
+        shape = (int(motion + 40), 60)
+        img = capsule_change(shape, x0=25.3 + rng.random(), y0=15.2 + rng.random(), dx=0.0, dy=motion,
+                             width=w, contrast=140.0)
+        change = (img + rng.normal(0, 2.0 * math.sqrt(1.5), shape)).astype(np.float32)
+        labels, stats = detect_streaks((img + rng.normal(0, 2.4, shape)).astype(np.float32), c=3.0)
+        big = int(np.argmax(stats[1:, 4]) + 1)
+        tab = measure_streak_table(change, labels, stats, [big], noise_sigma=2.0 * math.sqrt(1.5))
+        assert tab["ok"][0]
+        wa, mot = tab["width_apparent"][0], tab["motion"][0]
+        errs_a.append(radius_from_width_m(wa, z, focal_length_px=f) / (a_mm * 1e-3) - 1)
+        errs_v.append(velocity_from_length_m_s(mot + wa, wa, z, focal_length_px=f, exposure_s=T) / v - 1)
+        assert tab["chi2"][0] < 3.0            # a uniform streak fits its box
+    assert abs(np.mean(errs_a)) < 0.06, errs_a
+    assert abs(np.mean(errs_v)) < 0.03, errs_v
+    assert np.std(errs_v) < 0.04
+
+
+def test_closed_form_table_many_streaks_and_slant():
+    """Several streaks in one frame, one slanted by wind, measured together: each one's
+    motion, slope and width; and a two-signed change (an edge of moving scenery) fits
+    the streak model badly (large chi2)."""
+    from raingauge.gauge.streaks import measure_streak_table
+
+    rng = np.random.default_rng(5)
+    shape = (140, 200)
+    img = capsule_change(shape, x0=20.4, y0=15.6, dx=25.0, dy=80.0, width=6.0, contrast=140.0)
+    img += capsule_change(shape, x0=100.2, y0=20.0, dx=0.0, dy=60.0, width=4.0, contrast=140.0)
+    edge = np.zeros(shape)
+    edge[30:100, 160:164] = 12.0
+    edge[30:100, 164:168] = -12.0
+    change = (img + edge + rng.normal(0, 2.0, shape)).astype(np.float32)
+    labels, stats = detect_streaks(change, c=3.0)
+    sel = np.nonzero(stats[:, 4] > 0)[0]
+    tab = measure_streak_table(change, labels, stats, sel, noise_sigma=2.0)
+    xs = stats[sel, 0] + stats[sel, 2] / 2
+    slanted = int(np.argmin(np.abs(xs - 33)))
+    upright = int(np.argmin(np.abs(xs - 100)))
+    scenery = int(np.argmin(np.abs(xs - 164)))
+    assert tab["motion"][slanted] == pytest.approx(80.0, abs=2.0)
+    assert tab["slope"][slanted] == pytest.approx(25.0 / 80.0, abs=0.02)
+    assert tab["width_apparent"][slanted] == pytest.approx(6.0, rel=0.08)
+    assert tab["motion"][upright] == pytest.approx(60.0, abs=1.5)
+    assert tab["width_apparent"][upright] == pytest.approx(4.0, rel=0.1)
+    assert tab["chi2"][upright] < 3.0
+    assert not (tab["ok"][scenery] and tab["chi2"][scenery] <= 8.0)
+
+
+def test_spike_image_is_eq19_in_int16_and_float():
+    """The spike of Eq. (19), min(I_n - I_{n-1}, I_n - I_{n+1}), exact from 8-bit frames (int16)
+    and from linearised float frames; detection gives the same streaks either way."""
+    from raingauge.gauge.streaks import spike_image
+
+    rng = np.random.default_rng(2)
+    prev, cur, nxt = (rng.integers(0, 256, (60, 80)).astype(np.uint8) for _ in range(3))
+    ref = np.minimum(cur.astype(int) - prev, cur.astype(int) - nxt)
+    s16 = spike_image(prev, cur, nxt)
+    assert s16.dtype == np.int16
+    np.testing.assert_array_equal(s16, ref)
+    sf = spike_image(*(x.astype(np.float32) for x in (prev, cur, nxt)))
+    np.testing.assert_allclose(sf, ref, atol=1e-4)
+    img = capsule_change((120, 60), x0=30.0, y0=20.0, dx=0.0, dy=70.0, width=4.0, contrast=140.0)
+    base = rng.normal(60, 2, (120, 60))
+    frames = [np.clip(base, 0, 255).astype(np.uint8), np.clip(base + img, 0, 255).astype(np.uint8),
+              np.clip(base, 0, 255).astype(np.uint8)]
+    _, st_i = detect_streaks(spike_image(*frames), c=3.0)
+    _, st_f = detect_streaks(spike_image(*(x.astype(np.float32) for x in frames)), c=3.0)
+    np.testing.assert_array_equal(st_i[st_i[:, 4] > 0, :4][2:-2], st_f[st_f[:, 4] > 0, :4][2:-2])
+    assert np.count_nonzero(st_i[:, 4]) == np.count_nonzero(st_f[:, 4]) >= 1

@@ -501,7 +501,7 @@ def _slow_run(realtime):
         return gauges[-1]
 
     records = []
-    inst = Instrument(small_profile(), Grabber(src, shape=SHAPE, queue_size=4), window_s=0.2, step_s=0.1,
+    inst = Instrument(small_profile(), Grabber(src, shape=SHAPE, queue_size=16), window_s=0.2, step_s=0.1,
                       gauge_factory=factory, on_record=records.append, wall_t0=1.79e9)
     return inst.run(), records, gauges[0].times
 
@@ -519,6 +519,8 @@ def test_a_paced_source_drops_frames_explicitly_when_the_gauge_is_slower():
         assert ("dropped_frames" in r["quality"]) == (r["dropped_frames"] > 0)
     steps = np.diff(np.asarray(times) * 200.0)
     assert np.allclose(steps, np.round(steps)) and steps.max() >= 2     # true frame slots, with gaps
+    # the backlog is dropped at once: mostly runs of consecutive frames, not a gap at every frame
+    assert np.mean(np.round(steps) == 1) > 0.5
     assert times[-1] == pytest.approx(149 / 200.0)                        # the lag stayed bounded
 
 
@@ -596,3 +598,39 @@ def test_diagnostics_run_in_an_idle_priority_process(tmp_path):
         diag.close()
     with pytest.raises(ValueError, match="valid"):
         Diagnostics(tmp_path / "x", prof, priority="low")
+
+
+def _running(pid):
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return state not in ("Z", "X")
+
+
+def test_worker_processes_end_when_the_instrument_is_killed(tmp_path):
+    """kill -9 of the instrument leaves no renderer or diagnostics process behind."""
+    pytest.importorskip("raingauge.render.simulator").simulate
+    script = (
+        "import sys, time\n"
+        "from raingauge.instrument.loop import Diagnostics\n"
+        "from raingauge.instrument.sources import SimulatedSource, scaled_profile\n"
+        "from raingauge.profile import load_profile\n"
+        "p = scaled_profile(load_profile('gauge-default'), 48, 32)\n"
+        "d = Diagnostics(sys.argv[1], p).start((4,) + p.shape)\n"
+        "s = SimulatedSource(5.0, p, prefetch=2)\n"
+        "s.open()\n"
+        "print(d.pid, s._proc.pid, flush=True)\n"
+        "time.sleep(120)\n"
+    )
+    proc = subprocess.Popen([sys.executable, "-c", script, str(tmp_path / "d")], stdout=subprocess.PIPE, text=True)
+    try:
+        pids = [int(v) for v in proc.stdout.readline().split()]
+        assert len(pids) == 2 and all(_running(p) for p in pids)
+    finally:
+        proc.kill()
+        proc.wait()
+    deadline = time.monotonic() + 20
+    while any(_running(p) for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(_running(p) for p in pids)

@@ -11,7 +11,8 @@ Record fields: t_start_s, t_end_s, rain_rate_mm_h, rain_rate_ci95_mm_h
 ([lo, hi], 95 % interval from the counting statistics), accumulation_mm,
 drops_counted, drops_rejected_defocus, dsd_d_mm and dsd_n_m3_mm (N(D) in the
 32 Parsivel classes, m^-3 mm^-1), nt_m3, dm_mm, z_dbz, intensity_class,
-synop_4680, quality (flags), then nw_mm1_m3, lwc_g_m3, ke_flux_j_m2_h, z_mm6_m3.
+synop_4680, quality (flags), then nw_mm1_m3, lwc_g_m3, ke_flux_j_m2_h, z_mm6_m3,
+min_detectable_diameter_mm (the smallest drop visible against the background).
 
 Example:
     raingauge measure rain.mkv --camera gauge-default --window 60 --step 10
@@ -33,9 +34,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="interval between records [s] (default 10)")
     parser.add_argument("--format", choices=("jsonl", "csv"), default="jsonl",
                         help="output format (default jsonl)")
-    parser.add_argument("--velocity-model", default="paper", metavar="NAME",
-                        help="fall-velocity law of the defocus test: paper (default), gunn_kinzer, "
-                             "atlas1973, beard1976")
+    parser.add_argument("--velocity-model", default="gunn_kinzer", metavar="NAME",
+                        help="fall-velocity law of the defocus test: gunn_kinzer (default, measured), "
+                             "paper (v = 200 sqrt(a), too fast for drops < 1 mm), atlas1973, beard1976")
     parser.add_argument("--fps", type=float, default=None,
                         help="frame rate [1/s] (default: the profile's)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
@@ -102,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
         gauge = RainGauge(profile, window_s=args.window, step_s=args.step, velocity_model=args.velocity_model)
     except ValueError as exc:
         raise ConfigError(f"{exc}. Fix: choose a valid --velocity-model") from None
-    keys = list(RECORD_KEYS) + ["nw_mm1_m3", "lwc_g_m3", "ke_flux_j_m2_h", "z_mm6_m3"]
+    keys = list(RECORD_KEYS) + ["nw_mm1_m3", "lwc_g_m3", "ke_flux_j_m2_h", "z_mm6_m3", "min_detectable_diameter_mm"]
     writer = csv.writer(sys.stdout, lineterminator="\n") if args.format == "csv" else None
     if writer is not None:
         writer.writerow(keys)

@@ -7,6 +7,13 @@ A TOML file (--config, example in deploy/raingauge.toml) sets everything; the
 options below override it.  SIGTERM or Ctrl-C flush the last partial window,
 write what is queued and exit cleanly.
 
+The simulated camera renders in its own process and diagnostics run in a
+low-priority one, so the gauge keeps a core.  Paced sources (cameras, and
+files or simulation without --fast) do not wait for a slow gauge: frames it
+cannot take are dropped, counted in each record (dropped_frames) and flagged.
+The summary at exit gives frames measured and dropped, frames/s and the gauge's
+time per frame.
+
 Sources: simulate:RATE | a camera index (0) | rtsp:// or http:// URL |
 a video file | a folder of images.  Use "off" to switch an output off.
 """
@@ -26,7 +33,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--db", default=None, metavar="PATH", help="history database (SQLite), or off")
     parser.add_argument("--duration", type=float, default=None, metavar="S",
                         help="stop after S seconds of source time (default: run until stopped)")
-    parser.add_argument("--fast", action="store_true", help="play files and simulation as fast as possible")
+    parser.add_argument("--fast", action="store_true",
+                        help="play files and simulation as fast as the gauge goes (nothing dropped); "
+                             "without it they run at the camera's frame rate and frames the gauge cannot "
+                             "take are dropped, counted and flagged dropped_frames")
     parser.add_argument("--window", type=float, default=None, metavar="S", help="averaging window [s]")
     parser.add_argument("--step", type=float, default=None, metavar="S", help="record interval [s]")
     parser.add_argument("--sim-size", default=None, metavar="WxH", help="size of simulated frames, e.g. 320x240")

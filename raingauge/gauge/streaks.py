@@ -23,8 +23,12 @@ The gauge measures w and L with sub-pixel accuracy:
   depth (depth from defocus, up to the near/far ambiguity that the velocity
   law resolves).
 
-:class:`StreakProps` computes these lazily, like scikit-image's
-``regionprops``; :func:`detect_streaks` is the gauge's fast path from three
+:class:`StreakProps` computes these lazily by fits, like scikit-image's
+``regionprops``; :func:`measure_streak_table` is the gauge's closed-form fast
+path for all streaks of a frame at once (moments across the streak refined by
+a least-squares box width, half-plateau end crossings corrected by the exact
+cap offset :func:`cap_offset_px`), as accurate for uniform streaks
+(tests/test_gauge_streaks.py) and some 50 times cheaper; :func:`detect_streaks` is the gauge's fast path from three
 frames to labelled streaks (Eq. (19) on a change image smoothed along the fall
 direction), with pieces of one streak merged.
 """
@@ -631,13 +635,13 @@ def spike_image(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray) -> np.ndarra
     """
     import cv2
 
+    # min(I_n - I_{n-1}, I_n - I_{n+1}) = I_n - max(I_{n-1}, I_{n+1}): two passes, not three
+    brightest = cv2.max(prev, nxt)
     if prev.dtype == np.uint8 and cur.dtype == np.uint8 and nxt.dtype == np.uint8:
-        d1 = cv2.subtract(cur, prev, dtype=cv2.CV_16S)
-        d2 = cv2.subtract(cur, nxt, dtype=cv2.CV_16S)
-    else:
-        d1 = cv2.subtract(cur, prev)
-        d2 = cv2.subtract(cur, nxt)
-    return cv2.min(d1, d2)
+        spike = cur.astype(np.int16)
+        spike -= brightest
+        return spike
+    return cv2.subtract(cur, brightest)
 
 
 def fall_kernel(length_px: int, slope: float = 0.0) -> np.ndarray:
@@ -705,7 +709,17 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
     if spike.dtype == np.int16 and abs(slope) < 0.05 and 0 < smooth_px <= 64:
         # exact integer box sum (|spike| <= 255): compare the sum with n c
         n_s = max(int(smooth_px), 1)
-        s = cv2.boxFilter(spike, -1, (1, n_s), normalize=False) if n_s > 1 else spike
+        if n_s > 1 and spike.shape[0] > n_s:
+            # vertical box sum by shifted adds (faster than a 16-bit box filter); the n // 2
+            # rows at the top and bottom, where no streak is whole, stay 0
+            s = np.zeros_like(spike)
+            half = n_s // 2
+            acc = s[half:spike.shape[0] - (n_s - 1 - half)]
+            np.copyto(acc, spike[:acc.shape[0]])
+            for i in range(1, n_s):
+                acc += spike[i:i + acc.shape[0]]
+        else:
+            s = spike
         mask = cv2.compare(s, float(c) * n_s, cv2.CMP_GE)
     else:
         if spike.dtype != np.float32:
@@ -763,19 +777,23 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
             groups: dict[int, list[int]] = {}
             for i in list(parent):
                 groups.setdefault(find(i), []).append(i)
+            remap = np.arange(stats.shape[0], dtype=labels.dtype)
             for root, members in groups.items():
                 if len(members) < 2:
                     continue
                 m = np.array(members)
+                remap[m] = root
                 x0, y0 = stats[m, 0].min(), stats[m, 1].min()
                 x1 = (stats[m, 0] + stats[m, 2]).max()
                 y1 = (stats[m, 1] + stats[m, 3]).max()
                 stats[root] = [x0, y0, x1 - x0, y1 - y0, stats[m, 4].sum()]
-                sub = labels[y0:y1, x0:x1]
-                sub[np.isin(sub, m)] = root
-                for i in members:
-                    if i != root:
-                        stats[i, 4] = 0
+                stats[m[m != root], 4] = 0
+            for root, members in groups.items():
+                if len(members) < 2:
+                    continue
+                x0, y0, ww, hh = stats[root, :4]
+                sub = labels[y0:y0 + hh, x0:x0 + ww]
+                sub[...] = remap[sub]
     return labels, stats
 
 
@@ -1188,21 +1206,23 @@ def _cap_offset_table():
     centre at the start (or end) of the exposure; averaged over the sub-pixel phase.
     """
     widths = np.geomspace(0.2, 60.0, 90)
-    phases = (np.arange(8) + 0.5) / 8
+    phases = (np.arange(16) + 0.5) / 16
     out = np.empty(widths.size)
     for i, w in enumerate(widths):
         r = 0.5 * w
-        length = 4.0 * w + 20.0
-        offs = []
-        for ph in phases:
-            n = int(length + 2 * w + 12)
-            rows = np.arange(n) - (w + 6) - ph          # row centre minus the top end
-            hi = _capsule_cumulative(rows + 0.5, 0.0, length, r)
-            lo = _capsule_cumulative(rows - 0.5, 0.0, length, r)
-            prof = np.convolve(hi - lo, np.ones(3) / 3.0, mode="same")
-            span = half_level_span(prof, 0.5 * float(np.median(prof[n // 3: 2 * n // 3])))
-            offs.append(-(rows[0] + span[0]))
-        out[i] = float(np.mean(offs))
+        n = int(2 * w + 16)
+        # rows around the top end only (the plateau below it is 1): row centre minus the end
+        rows = np.arange(n)[None, :] - (w + 6) - phases[:, None]
+        hi = _capsule_cumulative(rows + 0.5, 0.0, 1e6, r)
+        lo = _capsule_cumulative(rows - 0.5, 0.0, 1e6, r)
+        prof = hi - lo
+        sm = prof.copy()
+        sm[:, 1:-1] = (prof[:, :-2] + prof[:, 1:-1] + prof[:, 2:]) / 3.0
+        k = np.argmax(sm >= 0.5, axis=1)
+        a_ = sm[np.arange(phases.size), k - 1]
+        b_ = sm[np.arange(phases.size), k]
+        cross = k - 1 + (0.5 - a_) / (b_ - a_)
+        out[i] = float(np.mean(-(rows[:, 0] + cross)))
     return widths, out
 
 
@@ -1221,6 +1241,68 @@ def cap_offset_px(width_px) -> np.ndarray:
         _CAP_TABLE = _cap_offset_table()
     w, off = _CAP_TABLE
     return np.interp(np.asarray(width_px, dtype=float), w, off)
+
+
+_BOX_FACTORS = np.geomspace(0.4, 2.0, 17)
+
+
+def _refine_box_width(ks, o, v, cen, w0, K):
+    """Least-squares width of a pixel-integrated box (height free) per streak [px].
+
+    ``ks`` streak index, ``o`` offset across [px] and ``v`` change of each pixel; ``cen``
+    the centres and ``w0`` the starting widths (K,).  The squared residual is evaluated at
+    w0 times :data:`_BOX_FACTORS` on the same pixels and the minimum is refined by a
+    parabola in ln w; streaks without a finite start keep it.
+    """
+    good = np.isfinite(w0) & np.isfinite(cen) & (w0 > 0)
+    base = np.where(good, np.maximum(w0, 0.6), 1.0)
+    reach = 0.5 * base * _BOX_FACTORS[-1] + 1.0
+    u = o - np.where(good, cen, 0.0)[ks]
+    keep = np.abs(u) <= reach[ks]
+    ku, uu, vv = ks[keep], np.abs(u[keep]), v[keep]
+    nf = _BOX_FACTORS.size
+    # the pixel-integrated box of half width h covers a pixel at offset |u| by min(1, 2h)
+    # inside |u| <= |h - 1/2|, by h + 1/2 - |u| out to h + 1/2, else 0: with the pixels
+    # sorted by streak and |u|, its sums come from cumulative sums at two boundaries
+    span = float(uu.max()) + 2.0 if uu.size else 1.0
+    key = ku * span + uu
+    order = np.argsort(key, kind="stable")
+    key, uo, vo = key[order], uu[order], vv[order]
+
+    def cums(x):
+        return np.concatenate(([0.0], np.cumsum(x)))
+
+    c_n, c_u, c_uu = cums(np.ones_like(uo)), cums(uo), cums(uo * uo)
+    c_v, c_vu = cums(vo), cums(vo * uo)
+    hw = 0.5 * base[:, None] * _BOX_FACTORS[None, :]                     # (K, nf)
+    a_ = np.abs(hw - 0.5)
+    b_ = hw + 0.5
+    c_in = np.minimum(1.0, 2.0 * hw)
+    kofs = (np.arange(K) * span)[:, None]
+    i0 = np.searchsorted(key, kofs).astype(np.int64)
+    ia = np.searchsorted(key, kofs + a_, side="right")
+    ib = np.searchsorted(key, kofs + np.minimum(b_, span - 1.0), side="left")
+
+    def seg(c, lo_i, hi_i):
+        return c[hi_i] - c[lo_i]
+
+    n_p, u_p, uu_p = seg(c_n, ia, ib), seg(c_u, ia, ib), seg(c_uu, ia, ib)
+    svc = c_in * seg(c_v, i0, ia) + b_ * seg(c_v, ia, ib) - seg(c_vu, ia, ib)
+    scc = c_in * c_in * seg(c_n, i0, ia) + b_ * b_ * n_p - 2.0 * b_ * u_p + uu_p
+    with np.errstate(all="ignore"):
+        gain = np.where((scc > 0) & (svc > 0), svc * svc / scc, -np.inf)   # SSE = sum v^2 - gain
+    j = np.argmax(gain, axis=1)
+    jj = np.clip(j, 1, nf - 2)
+    ar = np.arange(K)
+    g0, g1, g2 = gain[ar, jj - 1], gain[ar, jj], gain[ar, jj + 1]
+    with np.errstate(all="ignore"):
+        den = g0 - 2 * g1 + g2
+        shift = np.where((den < 0) & np.isfinite(den), 0.5 * (g0 - g2) / den, 0.0)
+    shift = np.clip(shift, -1.0, 1.0)
+    step = np.log(_BOX_FACTORS[1] / _BOX_FACTORS[0])
+    w_fit = base * _BOX_FACTORS[jj] * np.exp(shift * step)
+    inside = (j >= 1) & (j <= nf - 2) & np.isfinite(gain[ar, j])
+    return np.where(good & inside, w_fit, w0)
 
 
 def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarray, select, *,
@@ -1281,7 +1363,9 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
         valid = stats[:, 4] > 0
     x, y, w, h = (stats[L, k].astype(np.int64) for k in range(4))
     m = int(margin_px)
-    mh = m + np.maximum(2, w // 2)
+    # the band used below reaches 0.5 w_row + 1.5 + m/2 px from the axis, which lies inside
+    # the detected pixels: m + 2 px beyond the box hold it
+    mh = m + 2
     x0 = np.maximum(x - mh, 0)
     x1 = np.minimum(x + w + mh, N)
     y0 = np.maximum(y - m, 0)
@@ -1301,45 +1385,54 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     gx = x0[kk] + lx
     flat = gy * N + gx
     lab = np.take(labels, flat)
-    cur_g = None if cur is None else np.take(cur, flat).astype(np.float64)
-    if isinstance(change, tuple):
-        p_, c_, n_ = change
-        cg = cur_g if c_ is cur and cur_g is not None else np.take(c_, flat).astype(np.float64)
-        img = cg - 0.5 * (np.take(p_, flat).astype(np.float64) + np.take(n_, flat))
-    else:
-        img = np.take(change, flat).astype(np.float64)
-    img0 = img
-    if contrast is not None and cur is not None:
-        e_r, c_ref = contrast
-        bgp = cur_g - img
-        img = img * (c_ref / np.maximum(e_r - bgp, 0.25 * c_ref))
     own = lab == L[kk]
     other = (lab != 0) & ~own & valid[lab]
+
+    def values(ix):
+        """Change (divided by the local contrast when asked), raw change and I_n at pixels ix."""
+        f_ = flat[ix]
+        cg = None if cur is None else np.take(cur, f_).astype(np.float64)
+        if isinstance(change, tuple):
+            p_, c_, n_ = change
+            cc = cg if (c_ is cur and cg is not None) else np.take(c_, f_).astype(np.float64)
+            raw = cc - 0.5 * (np.take(p_, f_).astype(np.float64) + np.take(n_, f_))
+        else:
+            raw = np.take(change, f_).astype(np.float64)
+        val = raw
+        if contrast is not None and cg is not None:
+            e_r, c_ref = contrast
+            val = raw * (c_ref / np.maximum(e_r - (cg - raw), 0.25 * c_ref))
+        return val, raw, cg
+
     # -- axis from the moments of the positive change on the streak's own pixels
-    wts = np.where(own, np.maximum(img, 0.0), 0.0)
-    fx, fy = lx.astype(np.float64), ly.astype(np.float64)
-    s0 = np.bincount(kk, wts, K)
-    sx = np.bincount(kk, wts * fx, K)
-    sy = np.bincount(kk, wts * fy, K)
+    io = np.flatnonzero(own)
+    img_o, raw_o, cur_o = values(io)
+    ko = kk[io]
+    fx, fy = lx[io].astype(np.float64), ly[io].astype(np.float64)
+    wts = np.maximum(img_o, 0.0)
+    s0 = np.bincount(ko, wts, K)
+    sx = np.bincount(ko, wts * fx, K)
+    sy = np.bincount(ko, wts * fy, K)
     safe = np.where(s0 > 0, s0, 1.0)
     xm_l, ym_l = sx / safe, sy / safe
-    dy = fy - ym_l[kk]
-    myy = np.bincount(kk, wts * dy * dy, K) / safe
-    mxy = np.bincount(kk, wts * (fx - xm_l[kk]) * dy, K) / safe
+    dy = fy - ym_l[ko]
+    myy = np.bincount(ko, wts * dy * dy, K) / safe
+    mxy = np.bincount(ko, wts * (fx - xm_l[ko]) * dy, K) / safe
     slope = np.where(myy > 1e-9, mxy / np.where(myy > 1e-9, myy, 1.0), 0.0)
     xm = np.where(s0 > 0, xm_l + x0, x + w / 2.0)
     ym = np.where(s0 > 0, ym_l + y0, y + h / 2.0)
     slope = np.where(s0 > 0, slope, 0.0)
     # -- width of the detected pixels along a row
-    own_rows = np.bincount(rkey, own, R) > 0
+    own_rows = np.bincount(rkey[io], minlength=R) > 0
     n_rows = np.bincount(row_k, own_rows, K)
-    row_width = np.bincount(kk, own, K) / np.maximum(n_rows, 1)
+    row_width = np.bincount(ko, minlength=K) / np.maximum(n_rows, 1)
     # -- the band around the axis, row sums
-    centre = xm[kk] + slope[kk] * (gy - ym[kk])
-    off = gx - centre
+    off = gx - (xm[kk] + slope[kk] * (gy - ym[kk]))
     half = 0.5 * row_width + 1.5 + m / 2
-    band = (np.abs(off) <= half[kk]) & ~other
-    row_sum = np.bincount(rkey, np.where(band, img, 0.0), R)
+    ib = np.flatnonzero((np.abs(off) <= half[kk]) & ~other)
+    img_b = values(ib)[0]
+    kb, rb, ob, gyb = kk[ib], rkey[ib], off[ib], gy[ib].astype(np.float64)
+    row_sum = np.bincount(rb, img_b, R)
     H = int(ch.max())
     col = np.arange(R) - rstart[row_k]
     S = np.zeros((K, H + 2))
@@ -1370,25 +1463,24 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     w_guess = np.maximum(row_width * cos_t - 2.0, 1.0)
     lo_r = top_r + 0.5 * w_guess + 1.0
     hi_r = bot_r - 0.5 * w_guess - 1.0
-    gyf = gy.astype(np.float64)
-    sel = (gyf >= lo_r[kk]) & (gyf <= hi_r[kk])
-    nsel = np.bincount(rkey, sel & (lx == 0), R)
-    enough = np.bincount(row_k, nsel, K) >= 2
+    n_plateau_rows = np.floor(np.minimum(hi_r, y1 - 1.0)) - np.ceil(np.maximum(lo_r, y0)) + 1
+    enough = n_plateau_rows >= 2
     mid = 0.5 * (top_r + bot_r)
-    sel = np.where(enough[kk], sel, np.abs(gyf - mid[kk]) <= 1.0) & band
-    o = off * cos_t[kk]
-    n_cross = np.bincount(kk, sel, K)
-    # two passes: the whole band, then a window of w'/2 + 2 px about the centre (the far
+    sel = np.where(enough[kb], (gyb >= lo_r[kb]) & (gyb <= hi_r[kb]), np.abs(gyb - mid[kb]) <= 1.0)
+    js = np.flatnonzero(sel)
+    ks, img_s = kb[js], img_b[js]
+    o = ob[js] * cos_t[ks]
+    n_cross = np.bincount(ks, minlength=K)
+    # three passes: the whole band, then windows of w'/2 + 1.5 px about the centre (the far
     # pixels only add noise to the second moment; the edges of a sharp or uniformly
     # defocused streak end within 1 px of w'/2)
     win = np.full(K, np.inf)
     cen_o = np.zeros(K)
     for _ in range(3):
-        use = sel & (np.abs(o - cen_o[kk]) <= win[kk])
-        v = np.where(use, img, 0.0)
-        c0 = np.bincount(kk, v, K)
-        c1 = np.bincount(kk, v * o, K)
-        c2 = np.bincount(kk, v * o * o, K)
+        v = np.where(np.abs(o - cen_o[ks]) <= win[ks], img_s, 0.0)
+        c0 = np.bincount(ks, v, K)
+        c1 = np.bincount(ks, v * o, K)
+        c2 = np.bincount(ks, v * o * o, K)
         with np.errstate(all="ignore"):
             cen = c1 / c0
             var = c2 / c0 - cen ** 2
@@ -1398,17 +1490,23 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
                         row_width * cos_t + 2.0)
         win = np.where(good, 0.5 * w_lim + 1.5, win)
         cen_o = np.where(good, cen, cen_o)
+    # refine w' by least squares: a box of width w about that centre, its height in closed
+    # form, the squared residual compared on a grid of widths around the moment estimate and
+    # interpolated by a parabola (the moment is noisy on faint streaks: it weighs the far
+    # pixels' noise by their squared offset)
+    w_app = _refine_box_width(ks, o, img_s, cen, w_app, K)
     ok = has & (c0 > 0) & (n_cross >= 6) & np.isfinite(w_app) & (w_app > 0)
     # goodness of the uniform model: the change on the plateau rows against a box of width
     # w' (pixel-integrated) holding the same total, per pixel in units of the noise
-    n_r = np.bincount(row_k, np.bincount(rkey, sel, R) > 0, K)
+    n_r = np.bincount(row_k, np.bincount(rb[js], minlength=R) > 0, K)
     with np.errstate(all="ignore"):
         amp = c0 / (np.maximum(n_r, 1) * w_app)
-        hw = 0.5 * w_app[kk]
-        u = o - cen[kk]
+        hw = 0.5 * w_app[ks]
+        u = o - cen[ks]
         cover = np.clip(np.minimum(u + 0.5, hw) - np.maximum(u - 0.5, -hw), 0.0, None)
-        res = np.where(sel, img - amp[kk] * cover, 0.0)
-        chi2 = np.bincount(kk, res * res, K) / (np.maximum(n_cross, 1) * max(noise_sigma, 1e-3) ** 2)
+        res = img_s - amp[ks] * cover
+        chi2 = np.bincount(ks, res * res, K) / (np.maximum(n_cross, 1) * max(noise_sigma, 1e-3) ** 2)
+    chi2 = np.where(ok & np.isfinite(chi2), chi2, np.inf)
     cap = cap_offset_px(np.where(np.isfinite(w_app), w_app, 1.0))
     top = top_r + cap
     bot = bot_r - cap
@@ -1416,15 +1514,14 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     # -- background and the photometric slope of Eq. (18) on the own pixels
     bg_dn = np.full(K, np.nan)
     beta = np.full(K, np.nan)
-    ok_k, oy, ox = kk[own], gy[own], gx[own]
+    ok_k, oy, ox = ko, gy[io], gx[io]
     if cur is not None:
-        c_own = cur_g[own]
-        raw_change = img0[own]
+        c_own = cur_o
         n_own = np.bincount(ok_k, minlength=K)
         with np.errstate(all="ignore"):
-            bg_dn = np.bincount(ok_k, c_own - raw_change, K) / n_own
+            bg_dn = np.bincount(ok_k, c_own - raw_o, K) / n_own
         if prev is not None:
-            b = np.take(prev, flat[own]).astype(np.float64)
+            b = np.take(prev, flat[io]).astype(np.float64)
             d = c_own - b
             sb = np.bincount(ok_k, b, K)
             sbb = np.bincount(ok_k, b * b, K)

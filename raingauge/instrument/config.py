@@ -7,8 +7,9 @@ keys (see ``deploy/raingauge.toml`` for a commented example)::
     [camera]      profile            shipped profile name or path of a profile TOML
     [source]      uri                "simulate:RATE", a device index "0", rtsp:// or http(s):// URL,
                                      a video file or a folder of images
-                  realtime           play files / simulation at the camera's frame rate (true)
-                                     or as fast as possible (false)
+                  realtime           play files / simulation at the camera's frame rate (true: like
+                                     a camera, frames the gauge cannot take are dropped, counted and
+                                     flagged) or as fast as possible (false: nothing dropped)
                   size               [width, height] of simulated frames (simulation only)
                   reconnect_max_s    longest wait between reconnection attempts [s]
                   stall_timeout_s    no frame for this long counts as a lost camera [s]

@@ -254,11 +254,12 @@ def _lower_priority() -> str:
             return "normal"
 
 
-def _diagnostics_worker(folder, profile, keep, buf, shape, jobs, idle, count, log_level, priority) -> None:
+def _diagnostics_worker(folder, profile, keep, buf, shape, jobs, idle, count, log_level, priority,
+                        parent_pid) -> None:
     """The diagnostics process: one snapshot per job, frames read from the shared buffer."""
-    import signal
+    from raingauge.instrument.sources import _ignore_interrupts, get_or_orphaned
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)      # Ctrl-C is the instrument's to handle
+    _ignore_interrupts()
     logging.basicConfig(level=log_level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:                                              # imports at start-up, at normal priority
         import cv2  # noqa: F401
@@ -272,7 +273,7 @@ def _diagnostics_worker(folder, profile, keep, buf, shape, jobs, idle, count, lo
     writer = SnapshotWriter(folder, profile, keep=keep)
     ring = np.frombuffer(buf, dtype=np.uint8).reshape(shape)
     while True:
-        job = jobs.get()
+        job = get_or_orphaned(jobs, parent_pid)
         if job is None:
             return
         n, time_unix, rate, window_s = job
@@ -465,7 +466,8 @@ class Diagnostics:
         self._count = ctx.Value("i", 0)
         self._proc = ctx.Process(target=_diagnostics_worker, name="raingauge-diagnostics", daemon=True,
                                  args=(self.folder, self.profile, self.keep, buf, shape, self._jobs, self._idle,
-                                       self._count, logging.getLogger().getEffectiveLevel(), self.priority))
+                                       self._count, logging.getLogger().getEffectiveLevel(), self.priority,
+                                       os.getpid()))
         self._proc.start()
 
     def submit(self, frames: list[np.ndarray], *, time_unix: float, rain_rate_mm_h: float, window_s: float) -> bool:
@@ -506,8 +508,10 @@ class Diagnostics:
         proc.join(timeout=self.close_timeout_s)
         if proc.is_alive():
             log.info("diagnostics: a snapshot was still in progress at exit; stopped")
-            proc.terminate()
+            proc.kill()
             proc.join(timeout=2.0)
+            for part in self.folder.glob("*.part"):       # the unfinished snapshot
+                shutil.rmtree(part, ignore_errors=True)
         self._jobs.close()
         self._jobs.cancel_join_thread()
 
@@ -741,10 +745,17 @@ class Instrument:
                 self.diagnostics.start((self._ring.maxlen,) + tuple(self.profile.shape))
             except Exception:  # noqa: BLE001 - the gauge runs without diagnostics
                 log.exception("diagnostics cannot start; measuring without them")
-        g.start()
+        # The source starts (the simulated camera's renderer imports and renders ahead) while
+        # the gauge is built (its sample volume takes seconds); frames flow when both are ready.
+        g.start(hold=True)
         lost = False
-        last_frame_wall = time.monotonic()
         try:
+            try:
+                if self._gauge is None:
+                    self._new_gauge(0.0)
+            finally:
+                g.release()
+            last_frame_wall = time.monotonic()
             while not self._stop.is_set():
                 if time.monotonic() >= self._next_status_check:
                     self._next_status_check = time.monotonic() + 0.25
@@ -752,7 +763,7 @@ class Instrument:
                 item = g.get(timeout=0.25)
                 if item is None:
                     if g.finished.is_set() and g.queue.empty():
-                        if g.error is not None and self._gauge is None:
+                        if g.error is not None and self.frames == 0:
                             raise g.error
                         break
                     if g.source.live:
