@@ -549,7 +549,7 @@ class Instrument:
     """
 
     def __init__(self, profile, grabber, *, window_s: float = 60.0, step_s: float = 10.0,
-                 velocity_model: str = "paper", outputs: list | None = None, history=None,
+                 velocity_model: str = "gunn_kinzer", outputs: list | None = None, history=None,
                  diagnostics: Diagnostics | None = None, diagnostics_interval_s: float = 600.0,
                  diagnostics_frames: int = 32, stall_timeout_s: float = 5.0,
                  on_record: Callable[[dict], None] | None = None,
