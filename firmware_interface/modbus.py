@@ -63,7 +63,10 @@ def parse_host_port(spec: str, *, default_port: int = 502) -> tuple[str, int]:
     host, sep, port = spec.rpartition(":")
     if not sep:
         host, port = spec, str(default_port)
-    if not port.isdigit() or not 0 <= int(port) <= 65535:
+    if not port.isdigit():
+        raise ConfigError(f"Modbus TCP address {spec!r}: port {port!r} is not a number 0-65535. "
+                          "Fix: e.g. 127.0.0.1:5020")
+    if not 0 <= int(port) <= 65535:
         raise ConfigError(f"Modbus TCP address {spec!r}: port must be 0-65535. Fix: e.g. 127.0.0.1:5020")
     return host or "0.0.0.0", int(port)
 

@@ -75,7 +75,11 @@ class History:
         if readonly:
             if not self.path.exists():
                 raise InputError(f"{self.path}: no such database. Fix: give the --db that `raingauge run` writes")
-            conn = sqlite3.connect(f"file:{self.path}?mode=ro", uri=True, check_same_thread=False, timeout=10)
+            try:
+                conn = sqlite3.connect(f"file:{self.path}?mode=ro", uri=True, check_same_thread=False, timeout=10)
+            except sqlite3.Error as exc:
+                raise InputError(f"{self.path}: cannot open the history database ({exc}). "
+                                 "Fix: give the --db that `raingauge run` writes") from None
         else:
             try:
                 self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -92,8 +96,15 @@ class History:
             except sqlite3.DatabaseError as exc:
                 raise ConfigError(f"{self.path}: not a usable SQLite database ({exc}). "
                                   "Fix: move the file away or point --db elsewhere") from None
-        elif TABLE not in self.db.table_names():
-            raise InputError(f"{self.path}: holds no `{TABLE}` table. Fix: give a database written by `raingauge run`")
+        else:
+            try:
+                tables = self.db.table_names()
+            except sqlite3.DatabaseError as exc:
+                self.db.close()
+                raise InputError(f"{self.path}: not a usable SQLite database ({exc}). "
+                                 "Fix: give the --db that `raingauge run` writes") from None
+            if TABLE not in tables:
+                raise InputError(f"{self.path}: holds no `{TABLE}` table. Fix: give a database written by `raingauge run`")
 
     def _create(self) -> None:
         cols = sql_columns()

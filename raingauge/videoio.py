@@ -166,10 +166,14 @@ class FrameWriter:
         self.count = 0
         self._writer = None
         self._folder = is_image_folder_path(self.path)
-        if self._folder:
-            self.path.mkdir(parents=True, exist_ok=True)
-        else:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            if self._folder:
+                self.path.mkdir(parents=True, exist_ok=True)
+            else:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise InputError(f"{self.path}: cannot create the output {'folder' if self._folder else 'video'} "
+                             f"({exc.strerror or exc}). Fix: give a path in a writable folder") from None
 
     def write(self, frame: np.ndarray) -> None:
         import cv2

@@ -212,3 +212,15 @@ def _run_cam(cam, frames, **kw):
     for fr in frames:
         recs += g.process(fr)
     return recs + g.flush()
+
+
+@pytest.mark.parametrize("options, message", [
+    (["--fps", "0"], "--fps 0.0: the frame rate must be a positive number"),
+    (["--fps", "nan"], "--fps nan: the frame rate must be a positive number"),
+    (["--window", "inf"], "--window and --step must be > 0 s, got inf"),
+    (["--step", "nan"], "--window and --step must be > 0 s, got 60.0 and nan"),
+    (["--window", "10", "--step", "30"], "--step (30.0 s) must not exceed --window (10.0 s)"),
+])
+def test_measure_refuses_bad_timing_options(tmp_path, cli_error, options, message):
+    _, err = cli_error(["measure", tmp_path / "rain.mkv", "--camera", "gauge-default", *options], message)
+    assert "Fix: e.g. --" in err

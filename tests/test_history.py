@@ -177,3 +177,48 @@ def test_bad_times_and_paths():
     with pytest.raises(InputError, match="ISO 8601"):
         parse_iso("22/11/2026")
     assert parse_iso("2026-11-22") == parse_iso("2026-11-22T00:00:00+00:00")
+
+
+@pytest.mark.parametrize("command", [["export"], ["plot", "--png", "out.png"]])
+@pytest.mark.parametrize("content, message", [
+    (b"this is not a database, just text" * 40, "not a usable SQLite database"),
+    (None, "cannot open the history database"),  # a folder given as --db
+])
+def test_reading_commands_refuse_a_file_that_is_no_database(tmp_path, cli_error, command, content, message):
+    db = tmp_path / "notdb.sqlite"
+    if content is None:
+        db.mkdir()
+    else:
+        db.write_bytes(content)
+    argv = [command[0], "--db", str(db), *[str(tmp_path / a) if a.endswith(".png") else a for a in command[1:]]]
+    _, err = cli_error(argv, message)
+    assert "Fix: give the --db that `raingauge run` writes" in err
+    assert not (tmp_path / "out.png").exists()
+
+
+@pytest.mark.parametrize("command, option", [(["export"], "--csv"), (["plot"], "--png")])
+@pytest.mark.parametrize("target", ["folder", "missing/out.file"])
+def test_reading_commands_refuse_an_unwritable_output(tmp_path, cli_error, command, option, target):
+    db = tmp_path / "h.sqlite"
+    h = History(db)
+    for i in range(3):
+        h.append(_record(i))
+    h.close()
+    (tmp_path / "folder").mkdir()
+    out = tmp_path / target
+    _, err = cli_error([*command, "--db", db, option, out], f"{option} {out}: cannot write")
+    assert "Fix: give a writable file path" in err
+    assert not (tmp_path / "missing").exists() and not (tmp_path / "folder.png").exists()
+
+
+def test_plot_writes_png_to_the_name_given(tmp_path):
+    """Without a .png suffix the plot still goes to exactly OUT (as PNG), not to OUT.png."""
+    db = tmp_path / "h.sqlite"
+    h = History(db)
+    for i in range(3):
+        h.append(_record(i))
+    h.close()
+    out = tmp_path / "history-plot"
+    assert cli_main(["plot", "--db", str(db), "--png", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not (tmp_path / "history-plot.png").exists()

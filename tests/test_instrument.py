@@ -135,6 +135,8 @@ def test_example_config_in_deploy_is_valid():
     ({"source": {"realtime": "yes"}}, r"\[source\]\.realtime: expected true or false"),
     ({"history": {"retention_days": -1}}, r"\[history\]\.retention_days: must be >= 0"),
     ({"diagnostics": {"frames": 2}}, r"\[diagnostics\]\.frames: needs at least 3"),
+    ({"gauge": {"window_s": float("inf")}}, r"\[gauge\]\.window_s: expected a finite number, got inf.*Fix: window_s ="),
+    ({"gauge": {"step_s": float("nan")}}, r"\[gauge\]\.step_s: expected a finite number, got nan.*Fix: step_s ="),
 ])
 def test_config_errors_name_key_and_fix(doc, match):
     with pytest.raises(ConfigError, match=match):
@@ -634,3 +636,46 @@ def test_worker_processes_end_when_the_instrument_is_killed(tmp_path):
     while any(_running(p) for p in pids) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not any(_running(p) for p in pids)
+
+
+@pytest.mark.parametrize("duration", ["-1", "0", "nan"])
+def test_run_refuses_a_duration_that_is_not_positive(cli_error, duration):
+    _, err = cli_error(["run", "--duration", duration, "--db", "off", "--modbus-tcp", "off", "--quiet"],
+                       "must be a positive number of seconds")
+    assert f"--duration {duration}" in err
+
+
+@pytest.mark.parametrize("spec, message", [
+    ("host:99999", "Modbus TCP address 'host:99999': port must be 0-65535"),
+    (":abc", "Modbus TCP address ':abc': port 'abc' is not a number 0-65535"),
+    ("10.0.0.1:", "Modbus TCP address '10.0.0.1:': port '' is not a number 0-65535"),
+])
+def test_run_refuses_a_bad_modbus_tcp_address(cli_error, spec, message):
+    _, err = cli_error(["run", "--modbus-tcp", spec, "--duration", "1", "--db", "off", "--quiet"], message)
+    assert err.count("Fix:") == 1, err
+    assert "[modbus].tcp" in err
+
+
+@pytest.mark.parametrize("toml, message", [
+    ("[gauge]\nwindow_s = 1e400\n", "key [gauge].window_s: expected a finite number, got inf"),
+    ("[diagnostics]\ninterval_s = nan\n", "key [diagnostics].interval_s: expected a finite number, got nan"),
+    ("[gauge]\nwindow_s = \"abc\"\n", "key [gauge].window_s: expected a number, got 'abc'"),
+    ("[source\nuri =\n", "not valid TOML"),
+])
+def test_run_refuses_a_malformed_config_file(tmp_path, cli_error, toml, message):
+    cfg = tmp_path / "raingauge.toml"
+    cfg.write_text(toml)
+    _, err = cli_error(["run", "--config", cfg, "--duration", "1", "--db", "off", "--modbus-tcp", "off", "--quiet"],
+                       message)
+    assert "Fix:" in err
+
+
+@pytest.mark.parametrize("source, message", [
+    ("simulate:-3", "the rain rate must be a finite number >= 0 mm/h"),
+    ("simulate:inf", "the rain rate must be a finite number >= 0 mm/h"),
+    ("simulate:abc", "the rain rate 'abc' is not a number"),
+])
+def test_run_refuses_a_bad_simulated_rain_rate(cli_error, source, message):
+    _, err = cli_error(["run", "--source", source, "--duration", "1", "--db", "off", "--modbus-tcp", "off", "--quiet"],
+                       message)
+    assert "Fix: e.g. simulate:10" in err

@@ -497,3 +497,22 @@ def test_parsivel_replay_follows_the_records(shared_data):
         expect = drops.rain_rate_mm_h(dsd, "gunn_kinzer")
         assert w["rain_rate_mm_h"] == pytest.approx(expect, rel=0.3)
         assert w["nominal_rain_rate_mm_h"] == pytest.approx(rec.reported_rate_mm_h)
+
+
+@pytest.mark.parametrize("size", ["0x0", "32x0", "4x-3"])
+def test_cli_refuses_an_empty_frame_size(tmp_path, cli_error, size):
+    out = tmp_path / "x.mkv"
+    cli_error(["simulate", out, "--seconds", "0.1", "--rate", "5", "--size", size],
+              f"--size '{size}': width and height must be at least 1 pixel")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("name", ["rain.mkv", "frames"])
+def test_cli_refuses_an_output_that_cannot_be_created(tmp_path, cli_error, name):
+    blocker = tmp_path / "afile"
+    blocker.write_text("not a folder")
+    out = blocker / name
+    kind = "video" if name.endswith(".mkv") else "folder"
+    _, err = cli_error(["simulate", out, "--seconds", "0.1", "--rate", "5", "--size", "32x24"],
+                       f"{out}: cannot create the output {kind}")
+    assert "Fix: give a path in a writable folder" in err

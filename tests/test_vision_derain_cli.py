@@ -72,3 +72,20 @@ def test_clear_errors(tmp_path, clip, capsys):
     assert "must be a folder" in capsys.readouterr().err
     assert main(["derain", str(short), str(tmp_path / "o5"), "--l", "10"]) == 2
     assert "odd" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("which", ["OUT", "--mask", "--needles"])
+def test_unwritable_output_is_refused_clearly(tmp_path, clip, cli_error, which):
+    """An output below a regular file cannot be created: a clear error, not a traceback."""
+    frames, _, _ = clip
+    src = tmp_path / "in"
+    src.mkdir()
+    for i, f in enumerate(frames[:4]):
+        cv2.imwrite(str(src / f"f{i:03d}.png"), f)
+    blocker = tmp_path / "afile"
+    blocker.write_text("not a folder")
+    bad = blocker / "sub"
+    out = bad if which == "OUT" else tmp_path / "out"
+    extra = [] if which == "OUT" else [which, bad]
+    _, err = cli_error(["derain", src, out, *extra, "--quiet"], f"{bad}: cannot create the output folder")
+    assert "Fix: give a path in a writable folder" in err

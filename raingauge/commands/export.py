@@ -35,7 +35,12 @@ def run(args: argparse.Namespace) -> int:
         if args.csv == "-":
             n = hist.export_csv(sys.stdout, start=start, end=end)
         else:
-            with open(args.csv, "w", newline="") as fh:
+            try:
+                fh = open(args.csv, "w", newline="")
+            except OSError as exc:
+                raise InputError(f"--csv {args.csv}: cannot write ({exc.strerror or exc}). "
+                                 "Fix: give a writable file path, or - for standard output") from None
+            with fh:
                 n = hist.export_csv(fh, start=start, end=end)
     finally:
         hist.close()

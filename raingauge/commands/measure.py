@@ -91,10 +91,17 @@ def run(args: argparse.Namespace) -> int:
     from raingauge.profile import load_profile
     from raingauge.videoio import FrameReader
 
-    if not (args.window > 0 and args.step > 0):
-        raise ConfigError(f"--window and --step must be > 0 s, got {args.window} and {args.step}")
+    import math
+
+    if not (args.window > 0 and args.step > 0 and math.isfinite(args.window) and math.isfinite(args.step)):
+        raise ConfigError(f"--window and --step must be > 0 s, got {args.window} and {args.step}. "
+                          "Fix: e.g. --window 60 --step 10")
     if args.step > args.window:
-        raise ConfigError(f"--step ({args.step} s) must not exceed --window ({args.window} s)")
+        raise ConfigError(f"--step ({args.step} s) must not exceed --window ({args.window} s). "
+                          "Fix: e.g. --window 60 --step 10")
+    if args.fps is not None and not (args.fps > 0 and math.isfinite(args.fps)):
+        raise ConfigError(f"--fps {args.fps}: the frame rate must be a positive number [1/s]. "
+                          "Fix: e.g. --fps 30, or leave it out to use the profile's")
     profile = load_profile(args.camera)
     if args.fps is not None:
         profile = profile.replace(frame_rate_hz=float(args.fps))

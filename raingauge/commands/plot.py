@@ -64,8 +64,10 @@ def plot_history(rows: list[dict], png: str) -> None:
     axes[2].set_ylim(0, min(8.0, float(np.nanmax(d_centres)) + 0.5))
     axes[2].set_xlabel("time (UTC)")
     fig.suptitle(f"raingauge history, {t[0]:%Y-%m-%d %H:%M} to {t[-1]:%Y-%m-%d %H:%M} UTC")
-    fig.savefig(png, dpi=100)
-    plt.close(fig)
+    try:
+        fig.savefig(png, dpi=100, format="png")
+    finally:
+        plt.close(fig)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -81,6 +83,10 @@ def run(args: argparse.Namespace) -> int:
         hist.close()
     if not rows:
         raise InputError(f"{args.db}: no records in the chosen time range. Fix: widen --from/--to or run the gauge first")
-    plot_history(rows, args.png)
+    try:
+        plot_history(rows, args.png)
+    except OSError as exc:
+        raise InputError(f"--png {args.png}: cannot write the plot ({exc.strerror or exc}). "
+                         "Fix: give a writable file path such as rain.png") from None
     print(f"raingauge plot: {len(rows)} records -> {args.png}", file=sys.stderr)
     return 0

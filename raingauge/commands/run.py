@@ -171,12 +171,16 @@ def build_instrument(config, *, print_records=True, gauge_factory=None):
 
 def run(args: argparse.Namespace) -> int:
     import logging
+    import math
     import signal
     import sys
 
     from raingauge.errors import ConfigError
     from raingauge.instrument.config import apply_overrides, load_config
 
+    if args.duration is not None and not (args.duration > 0 and math.isfinite(args.duration)):
+        raise ConfigError(f"--duration {args.duration:g}: must be a positive number of seconds. "
+                          "Fix: e.g. --duration 60, or leave it out to run until stopped")
     config = load_config(args.config)
     size = None
     if args.sim_size:

@@ -112,6 +112,8 @@ def run(args: argparse.Namespace) -> int:
             w, h = (int(v) for v in args.size.lower().split("x"))
         except ValueError:
             raise ConfigError(f"--size {args.size!r}: expected WIDTHxHEIGHT, e.g. 320x240") from None
+        if w < 1 or h < 1:
+            raise ConfigError(f"--size {args.size!r}: width and height must be at least 1 pixel. Fix: e.g. --size 320x240")
         camera = small_profile(w, h, base=camera or "gauge-default")
     sim = simulate(
         camera, seconds=args.seconds, rain_rate_mm_h=args.rate,

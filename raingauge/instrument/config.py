@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -93,6 +94,8 @@ def _err(source: str | None, section: str, key: str | None, problem: str) -> Con
 def _number(src, sec, key, v, *, positive=True, allow_zero=False, integer=False) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not isinstance(v, int)):
         raise _err(src, sec, key, f"expected {'an integer' if integer else 'a number'}, got {v!r}")
+    if not math.isfinite(v):
+        raise _err(src, sec, key, f"expected a finite number, got {v!r}")
     if positive and not (v > 0 or (allow_zero and v == 0)):
         raise _err(src, sec, key, f"must be {'>= 0' if allow_zero else '> 0'}, got {v!r}")
     return v
@@ -176,7 +179,7 @@ def _validate(data: dict, source: str | None) -> dict[str, dict]:
         try:
             parse_host_port(m["tcp"])
         except ConfigError as exc:
-            raise _err(S, "modbus", "tcp", str(exc)) from None
+            raise _err(S, "modbus", "tcp", str(exc).split(". Fix:")[0]) from None
     if m["rtu_parity"] not in ("N", "E", "O"):
         raise _err(S, "modbus", "rtu_parity", f"must be N, E or O, got {m['rtu_parity']!r}")
     u = _number(S, "modbus", "unit_id", m["unit_id"], integer=True)

@@ -277,7 +277,8 @@ class SimulatedSource(FrameSource):
                  seed: int = 0, limit_frames: int | None = None, process: bool = True, prefetch: int = 6,
                  start_timeout_s: float = 120.0):
         if not (rain_rate_mm_h >= 0 and np.isfinite(rain_rate_mm_h)):
-            raise InputError(f"simulate:{rain_rate_mm_h}: the rain rate must be >= 0 mm/h. Fix: e.g. simulate:10")
+            raise InputError(f"simulate:{rain_rate_mm_h}: the rain rate must be a finite number >= 0 mm/h. "
+                             "Fix: e.g. simulate:10")
         if int(prefetch) < 1:
             raise InputError(f"prefetch = {prefetch}: at least one frame must be rendered ahead. Fix: prefetch=6")
         self.rain_rate_mm_h = float(rain_rate_mm_h)
