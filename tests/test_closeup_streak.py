@@ -13,6 +13,7 @@ from raingauge.cli import main
 from raingauge.render.closeup import (cached_closeup_streak, closeup_streak, light_direction,
                                       light_scene, render_closeup_drop, render_closeup_streak)
 from raingauge.render.oscillation import OscillatingDrop, rayleigh_frequency_hz
+from signal_helpers import period_of
 
 A = 1.5e-3            # drop radius [m]
 WIDTH = 8.0           # drop image diameter [px]
@@ -103,17 +104,6 @@ def test_streak_is_symmetric_under_mirrored_lighting():
     assert np.abs(left - right[:, ::-1]).max() > 0.02 * left.max()
 
 
-def _period_of(profile, guess):
-    """Lag of the smallest mean squared difference between the profile and its shift [px]."""
-    n = profile.size
-    lags = np.arange(1, int(1.6 * guess) + 2)
-    d = np.array([np.mean((profile[k:] - profile[:n - k]) ** 2) for k in lags])
-    lo = int(0.5 * guess)
-    j = lo - 1 + int(np.argmin(d[lo - 1:-1]))
-    y0, y1, y2 = d[j - 1], d[j], d[j + 1]
-    return lags[j] + 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
-
-
 @pytest.mark.parametrize("frequency_scale, view_theta", [(1.0, 0.0), (1.6, 0.4)])
 def test_pattern_spacing_is_fall_distance_per_period(frequency_scale, view_theta):
     f = rayleigh_frequency_hz(A) * frequency_scale
@@ -130,7 +120,7 @@ def test_pattern_spacing_is_fall_distance_per_period(frequency_scale, view_theta
     body = s.radiance[int(WIDTH) + 2:-int(WIDTH) - 2]
     assert body.sum(axis=1).std() > 0.01 * body.sum(axis=1).mean()      # there is a pattern
     for profile in (body.sum(axis=1), body.max(axis=1)):
-        assert _period_of(profile, expected) == pytest.approx(expected, abs=1.0)
+        assert period_of(profile, expected) == pytest.approx(expected, abs=1.0)
     # and no streak is brighter than the light it refracts
     assert s.radiance.max() <= s.max_scene_radiance
     assert np.all(s.radiance <= s.coverage * s.max_scene_radiance + 1e-6)

@@ -50,21 +50,29 @@ def measure_one(change, spike=None, *, c=3.0):
     return measure_streaks(change.astype(np.float32), labels, stats, CAM, select=[big])[0]
 
 
+def focused_drop_changes(a_mm, v, z, *, seed, n=6):
+    """``n`` noisy change images of a focused drop of radius ``a_mm`` [mm], speed ``v`` [m/s]
+    at depth ``z`` [m] on the gauge camera, each with an independent noisy copy for detection."""
+    rng = np.random.default_rng(seed)
+    f, T = CAM.focal_length_px, CAM.exposure_s
+    w = 2 * f * a_mm * 1e-3 / z
+    motion = f * v * T / z
+    shape = (int(motion + 40), 60)
+    for _ in range(n):
+        img = capsule_change(shape, x0=25.3 + rng.random(), y0=15.2 + rng.random(), dx=0.0, dy=motion,
+                             width=w, contrast=140.0)
+        change = img + rng.normal(0, 2.0 * math.sqrt(1.5), shape)
+        yield change, img + rng.normal(0, 2.4, shape)
+
+
 @pytest.mark.parametrize("a_mm, v, z", [(1.0, 4.4, 2.5), (2.0, 6.5, 2.45), (0.6, 2.5, 2.55)])
 def test_width_and_length_recover_a_and_v(a_mm, v, z):
     """A focused drop of known radius, speed and depth, with sensor noise: the measured
     width and motion give back a and v (at the true z) within a few per cent."""
-    rng = np.random.default_rng(int(a_mm * 10))
     f, T = CAM.focal_length_px, CAM.exposure_s
-    w = 2 * f * a_mm * 1e-3 / z
-    motion = f * v * T / z
     errs_a, errs_v = [], []
-    for k in range(6):
-        shape = (int(motion + 40), 60)
-        img = capsule_change(shape, x0=25.3 + rng.random(), y0=15.2 + rng.random(), dx=0.0, dy=motion,
-                             width=w, contrast=140.0)
-        change = img + rng.normal(0, 2.0 * math.sqrt(1.5), shape)
-        p = measure_one(change, img + rng.normal(0, 2.4, shape))
+    for change, detect in focused_drop_changes(a_mm, v, z, seed=int(a_mm * 10)):
+        p = measure_one(change, detect)
         length = p.length_px
         errs_a.append(radius_from_width_m(p.width_px, z, focal_length_px=f) / (a_mm * 1e-3) - 1)
         errs_v.append(velocity_from_length_m_s(length, p.width_px, z, focal_length_px=f, exposure_s=T) / v - 1)
@@ -171,17 +179,11 @@ def test_closed_form_table_recovers_a_and_v(a_mm, v, z):
     once) gives a and v of focused drops as well as the fits: same tolerances as above."""
     from raingauge.gauge.streaks import measure_streak_table
 
-    rng = np.random.default_rng(int(a_mm * 10) + 7)
     f, T = CAM.focal_length_px, CAM.exposure_s
-    w = 2 * f * a_mm * 1e-3 / z
-    motion = f * v * T / z
     errs_a, errs_v = [], []
-    for k in range(6):
-        shape = (int(motion + 40), 60)
-        img = capsule_change(shape, x0=25.3 + rng.random(), y0=15.2 + rng.random(), dx=0.0, dy=motion,
-                             width=w, contrast=140.0)
-        change = (img + rng.normal(0, 2.0 * math.sqrt(1.5), shape)).astype(np.float32)
-        labels, stats = detect_streaks((img + rng.normal(0, 2.4, shape)).astype(np.float32), c=3.0)
+    for change, detect in focused_drop_changes(a_mm, v, z, seed=int(a_mm * 10) + 7):
+        change = change.astype(np.float32)
+        labels, stats = detect_streaks(detect.astype(np.float32), c=3.0)
         big = int(np.argmax(stats[1:, 4]) + 1)
         tab = measure_streak_table(change, labels, stats, [big], noise_sigma=2.0 * math.sqrt(1.5))
         assert tab["ok"][0]

@@ -15,6 +15,7 @@ import math
 import numpy as np
 import pytest
 
+from signal_helpers import period_of
 from raingauge.cli import main
 from raingauge.physics import drops
 from raingauge.render.oscillation import rayleigh_frequency_hz
@@ -34,17 +35,6 @@ BACKLIGHT = (math.radians(150.0), math.radians(90.0))
 def _still(amp=0.09):
     return {"amp_axisymmetric": [amp], "amp_transverse": [0.0], "phase_axisymmetric": [0.0],
             "phase_transverse": [0.0], "transverse_azimuth": [0.0]}
-
-
-def _period_of(profile, guess):
-    """Lag of the smallest mean squared difference between the profile and its shift [px]."""
-    n = profile.size
-    lags = np.arange(1, int(1.6 * guess) + 2)
-    d = np.array([np.mean((profile[k:] - profile[:n - k]) ** 2) for k in lags])
-    lo = int(0.5 * guess)
-    j = lo - 1 + int(np.argmin(d[lo - 1:-1]))
-    y0, y1, y2 = d[j - 1], d[j], d[j + 1]
-    return lags[j] + 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
 
 
 @pytest.fixture(scope="module")
@@ -75,7 +65,7 @@ def test_near_drop_pattern_repeats_every_fall_per_oscillation(near_drop):
     profile = body.sum(axis=1)
     assert profile.std() > 0.05 * profile.mean()                # a visible pattern along the streak
     for prof in (profile, body.max(axis=1)):
-        assert _period_of(prof, expected) == pytest.approx(nd["info"]["period_px"][0], rel=0.03)
+        assert period_of(prof, expected) == pytest.approx(nd["info"]["period_px"][0], rel=0.03)
     # without oscillation the streak is flat along its length
     _, rad0, _ = render_closeup_drops(nd["shape"], nd["p0"], nd["p1"], [nd["a"]], [nd["a_i"]], [0.0],
                                          exposure_s=nd["T"], drop_brightness_dn=DEFAULT_DROP_BRIGHTNESS_DN,
