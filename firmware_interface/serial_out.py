@@ -23,12 +23,53 @@ __all__ = ["SerialWriter", "parse_port_spec"]
 log = logging.getLogger("raingauge.serial")
 
 
+#: Baud rates a serial adapter accepts in practice [bit/s].
+MIN_BAUD, MAX_BAUD = 50, 4_000_000
+
+
 def parse_port_spec(spec: str, *, default_baud: int = 9600) -> tuple[str, int]:
-    """``PORT[:BAUD]`` -> (port, baud).  ``/dev/ttyUSB0:4800`` or ``COM3``."""
-    port, sep, baud = spec.rpartition(":")
-    if sep and baud.isdigit() and port:
-        return port, int(baud)
-    return spec, default_baud
+    """``PORT[:BAUD]`` -> (port, baud).
+
+    ``/dev/ttyUSB0:4800``, ``COM3``, ``COM3:19200``.  A pyserial URL
+    (``socket://host:7000``, ``rfc2217://host:2217``, ``loop://``) is taken
+    whole: its colons belong to the URL; give its baud as ``URL@BAUD``.
+    Device paths that contain colons themselves
+    (``/dev/serial/by-path/pci-0000:00:14.0-usb-0:2:1.0``) are kept whole
+    when the last part is not a number.
+
+    Raises
+    ------
+    ConfigError
+        when the part after the last colon looks like a baud rate but is
+        not a whole number in [50, 4000000] (``/dev/ttyUSB0:96OO``), or the
+        port is empty.
+    """
+    from raingauge.errors import ConfigError
+
+    spec = str(spec).strip()
+    fix = "Fix: write PORT or PORT:BAUD, e.g. /dev/ttyUSB0:9600 (a pyserial URL as socket://host:7000@9600)"
+    if not spec:
+        raise ConfigError(f"serial port is empty. {fix}")
+    if "://" in spec:
+        port, sep, baud = spec.rpartition("@")
+        if not sep:
+            return spec, int(default_baud)
+    else:
+        port, sep, baud = spec.rpartition(":")
+        if not sep:
+            return spec, int(default_baud)
+        # a colon inside a device name (by-path names) is not a baud separator
+        looks_like_baud = baud[:1].isdigit() and len(baud) <= 9 and not any(ch in baud for ch in "./-_:")
+        if not baud.isdigit() and not looks_like_baud:
+            return spec, int(default_baud)
+    if not port:
+        raise ConfigError(f"serial port {spec!r} has a baud rate but no port. {fix}")
+    if not baud.isdigit():
+        raise ConfigError(f"serial port {spec!r}: baud rate {baud!r} is not a whole number. {fix}")
+    rate = int(baud)
+    if not MIN_BAUD <= rate <= MAX_BAUD:
+        raise ConfigError(f"serial port {spec!r}: baud rate {rate} is outside {MIN_BAUD}-{MAX_BAUD} bit/s. {fix}")
+    return port, rate
 
 
 class SerialWriter:

@@ -679,3 +679,31 @@ def test_run_refuses_a_bad_simulated_rain_rate(cli_error, source, message):
     _, err = cli_error(["run", "--source", source, "--duration", "1", "--db", "off", "--modbus-tcp", "off", "--quiet"],
                        message)
     assert "Fix: e.g. simulate:10" in err
+
+
+@pytest.mark.parametrize("option, spec, message", [
+    ("--serial", "/dev/ttyUSB0:96OO", "baud rate '96OO' is not a whole number"),
+    ("--modbus-rtu", "/dev/ttyUSB1:12", "baud rate 12 is outside"),
+])
+def test_run_refuses_a_malformed_serial_port(cli_error, option, spec, message):
+    _, err = cli_error(["run", option, spec, "--duration", "1", "--db", "off", "--modbus-tcp", "off", "--quiet"],
+                       message)
+    assert "Fix:" in err
+
+
+def test_run_refuses_a_recording_with_no_usable_frames(tmp_path, cli_error):
+    import cv2
+
+    wrong_size = tmp_path / "wrong_size"
+    wrong_size.mkdir()
+    for i in range(4):
+        cv2.imwrite(str(wrong_size / f"{i:03d}.png"), np.full((90, 120), 40, np.uint8))
+    _, err = cli_error(["run", "--source", wrong_size, "--sim-size", "160x120", "--fast", "--db", "off",
+                        "--modbus-tcp", "off", "--quiet"], "gave 0 usable frame(s) (4 unreadable or not")
+    assert "Fix:" in err
+    two = tmp_path / "two"
+    two.mkdir()
+    for i in range(2):
+        cv2.imwrite(str(two / f"{i:03d}.png"), np.full((720, 1280), 40, np.uint8))
+    cli_error(["run", "--source", two, "--fast", "--db", "off", "--modbus-tcp", "off", "--quiet"],
+              "the gauge needs at least 3 consecutive frames")

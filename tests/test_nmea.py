@@ -76,6 +76,32 @@ def test_any_record_gives_valid_short_sentences(rate, acc, drops, status):
 def test_port_spec():
     assert parse_port_spec("/dev/ttyUSB0:4800") == ("/dev/ttyUSB0", 4800)
     assert parse_port_spec("/dev/ttyUSB0") == ("/dev/ttyUSB0", 9600)
+    assert parse_port_spec("COM3:19200", default_baud=9600) == ("COM3", 19200)
+    # pyserial URLs keep their own colons; baud after '@'
+    assert parse_port_spec("socket://10.0.0.5:7000") == ("socket://10.0.0.5:7000", 9600)
+    assert parse_port_spec("socket://10.0.0.5:7000@4800") == ("socket://10.0.0.5:7000", 4800)
+    assert parse_port_spec("loop://") == ("loop://", 9600)
+    # by-path device names contain colons that are not baud separators
+    by_path = "/dev/serial/by-path/pci-0000:00:14.0-usb-0:2:1.0-port0"
+    assert parse_port_spec(by_path) == (by_path, 9600)
+    assert parse_port_spec(by_path + ":115200") == (by_path, 115200)
+
+
+@pytest.mark.parametrize("spec, words", [
+    ("/dev/ttyUSB0:96OO", "not a whole number"),
+    ("/dev/ttyUSB0:9600baud", "not a whole number"),
+    ("/dev/ttyUSB0:12", "outside"),
+    ("/dev/ttyUSB0:99999999", "outside"),
+    (":9600", "no port"),
+    ("", "empty"),
+    ("socket://h:7000@fast", "not a whole number"),
+])
+def test_malformed_port_spec_is_refused_with_a_fix(spec, words):
+    from raingauge.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=words) as exc:
+        parse_port_spec(spec)
+    assert "Fix:" in str(exc.value)
 
 
 def _read_lines(fd, n, timeout_s=5.0) -> list[str]:

@@ -207,7 +207,10 @@ def run(args: argparse.Namespace) -> int:
           f"at {p.frame_rate_hz:g} Hz; a record every {inst.step_s:g} s over {inst.window_s:g} s",
           file=sys.stderr, flush=True)
 
+    signalled = []
+
     def on_signal(signum, frame):
+        signalled.append(signum)
         inst.stop()
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
@@ -217,4 +220,14 @@ def run(args: argparse.Namespace) -> int:
         for s, h in old.items():
             signal.signal(s, h)
     print("raingauge run: " + ", ".join(f"{k} {v}" for k, v in summary.items()), file=sys.stderr)
+    src = inst.grabber.source
+    if not src.live and not signalled and int(summary.get("frames") or 0) < 3:
+        from raingauge.errors import InputError
+
+        bad = int(summary.get("corrupt_frames") or 0)
+        raise InputError(
+            f"source {src.name} gave {int(summary.get('frames') or 0)} usable frame(s) ({bad} unreadable or not "
+            f"{p.width_px}x{p.height_px}); the gauge needs at least 3 consecutive frames, so nothing was measured. "
+            f"Fix: give a video or image folder of at least 3 frames at {p.width_px}x{p.height_px}, or a camera "
+            "profile (--camera) of the source's size")
     return 0
