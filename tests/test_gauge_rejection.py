@@ -91,3 +91,80 @@ def test_blur_test_relative_to_width():
     assert not passes_blur(3.0, 3.0)
     assert passes_blur(3.0, 10.0)
     assert not passes_blur(float("nan"), 10.0)
+
+
+def test_tolerance_follows_each_streaks_own_errors():
+    """Two streaks with the same (a, v), one measured well and one poorly: the law's
+    tolerance follows each one's own error, so a pair 25 % slow fails when measured to
+    0.05 px and passes when its ends are uncertain by 4 px."""
+    f, z0, T = CAM.focal_length_px, CAM.focus_distance_m, CAM.exposure_s
+    a = 0.6e-3
+    w = 2 * f * a / z0
+    v = 0.75 * float(fall_velocity(2 * a, model="gunn_kinzer"))
+    motion = f * v * T / z0
+    sharp = passes_velocity_law(a, v, w, motion, model="gunn_kinzer", width_sigma_px=0.05, motion_sigma_px=0.3)
+    blurry = passes_velocity_law(a, v, w, motion, model="gunn_kinzer", width_sigma_px=0.05, motion_sigma_px=4.0)
+    assert not sharp and blurry
+    tol = law_tolerance(np.full(3, a), np.full(3, w), np.full(3, motion), model="gunn_kinzer",
+                        width_sigma_px=np.array([0.05, 0.3, 0.3]), motion_sigma_px=np.array([0.3, 0.3, 3.0]))
+    assert tol[0] < tol[1] < tol[2]
+
+
+def test_streak_errors_fall_with_signal_and_width():
+    """The streak's own errors: four times the signal (and its squared noise term) makes
+    the motion error smaller, a narrow streak's width is less certain than a wide one's
+    (the pixel grid), and a streak without signal has no finite error."""
+    from raingauge.gauge.rejection import streak_errors_px
+
+    sw1, sl1 = streak_errors_px(3.0, 45.0, 20.0, 3.0)
+    sw4, sl4 = streak_errors_px(3.0, 45.0, 80.0, 3.0)
+    assert sl4 < 0.3 * sl1 and sw4 < sw1
+    narrow, _ = streak_errors_px(1.3, 25.0, 1.3 * 40.0, 1.0)
+    wide, _ = streak_errors_px(3.0, 25.0, 3.0 * 40.0, 1.0)
+    assert narrow > 5 * wide
+    bad_w, bad_l = streak_errors_px(3.0, 45.0, 0.0, 1.0)
+    assert np.isinf(bad_w) and np.isinf(bad_l)
+
+
+def test_streak_change_is_the_drops_exposure_area_spread_over_the_streak():
+    """beta (E_r - E_b) over a capsule w' wide around the motion L holds the drop's
+    exposure area pi a_i^2 times the contrast: Q of :func:`exposure_area_px2` from the
+    row-sum plateau A w' gives back pi a_i^2 C (Eqs. 17, 23)."""
+    from raingauge.gauge.rejection import streak_change_dn
+
+    a_i, w_app, motion, c = 1.4, 3.5, 40.0, 150.0
+    change = float(streak_change_dn(a_i, w_app, motion, c))
+    q_total = float(exposure_area_px2(change * w_app, motion, w_app))
+    assert q_total == pytest.approx(math.pi * a_i ** 2 * c, rel=1e-12)
+    # a focused streak (w' = 2 a_i) of a 4 ms exposure changes a pixel by a few percent of C
+    assert 0.01 < change / c < 0.1
+
+
+def test_detection_probability_limits():
+    """Eq. (19): a change far above c is always detected, far below never; at
+    A - sigma / sqrt(pi) = c one try is a coin toss, and a longer streak offers more tries."""
+    from raingauge.gauge.rejection import detection_probability
+
+    kw = dict(threshold_dn=3.0, noise_sigma_dn=2.0)
+    assert detection_probability(20.0, 3.0, **kw) > 0.999
+    assert detection_probability(0.5, 3.0, **kw) < 1e-3
+    half = 3.0 + 2.0 / math.sqrt(math.pi)
+    assert detection_probability(half, 3.0, **kw) == pytest.approx(0.5, abs=1e-9)
+    p_long = detection_probability(half, 3.0, length_px=50.0, **kw)
+    assert p_long == pytest.approx(1 - 0.5 ** 10, rel=1e-9)
+    # a streak narrower than a pixel column shares its change between two columns
+    assert detection_probability(half, 1.2, **kw) < 0.5
+
+
+def test_change_noise_is_the_sensor_noise_without_the_streaks():
+    """The change image I_n - (I_{n-1} + I_{n+1}) / 2 of three frames with noise sigma has
+    the noise sqrt(1.5) sigma; bright streaks on 2 % of the pixels do not inflate it."""
+    from raingauge.gauge.rejection import change_noise_dn
+
+    rng = np.random.default_rng(7)
+    shape = (240, 320)
+    frames = [60.0 + rng.normal(0.0, 2.0, shape) for _ in range(3)]
+    cur = frames[1].copy()
+    cur[:, ::50] += 40.0                       # streak columns
+    est = change_noise_dn(frames[0], cur, frames[2])
+    assert est == pytest.approx(2.0 * math.sqrt(1.5), rel=0.05)

@@ -247,3 +247,56 @@ def test_spike_image_is_eq19_in_int16_and_float():
     _, st_f = detect_streaks(spike_image(*(x.astype(np.float32) for x in frames)), c=3.0)
     np.testing.assert_array_equal(st_i[st_i[:, 4] > 0, :4][2:-2], st_f[st_f[:, 4] > 0, :4][2:-2])
     assert np.count_nonzero(st_i[:, 4]) == np.count_nonzero(st_f[:, 4]) >= 1
+
+
+def test_streak_in_many_pieces_is_one_label():
+    """A faint streak broken into four pieces by three short gaps is one label: its box
+    spans all pieces, its area is theirs together and all its pixels carry the label; a
+    separate streak beside it keeps its own."""
+    shape = (160, 80)
+    img = capsule_change(shape, x0=20.0, y0=10.0, dx=0.0, dy=130.0, width=4.0, contrast=140.0)
+    for gap in (40, 75, 110):
+        img[gap:gap + 4, :] = 0.0
+    img += capsule_change(shape, x0=60.0, y0=30.0, dx=0.0, dy=80.0, width=4.0, contrast=140.0)
+    apart, st_apart = detect_streaks(img.astype(np.float32), c=3.0, smooth_px=1, merge_gap_px=0)
+    labels, stats = detect_streaks(img.astype(np.float32), c=3.0, smooth_px=1)
+    pieces = [k for k in np.nonzero(st_apart[:, 4])[0] if st_apart[k, 0] < 40]
+    assert len(pieces) == 4
+    streaks = np.nonzero(stats[:, 4])[0]
+    assert len(streaks) == 2
+    left = int(streaks[np.argmin(stats[streaks, 0])])
+    x0 = st_apart[pieces, 0].min()
+    y0 = st_apart[pieces, 1].min()
+    x1 = (st_apart[pieces, 0] + st_apart[pieces, 2]).max()
+    y1 = (st_apart[pieces, 1] + st_apart[pieces, 3]).max()
+    np.testing.assert_array_equal(stats[left], [x0, y0, x1 - x0, y1 - y0, st_apart[pieces, 4].sum()])
+    np.testing.assert_array_equal(labels == left, np.isin(apart, pieces))
+    right = int(streaks[streaks != left][0])
+    np.testing.assert_array_equal(labels == right, apart == right)
+
+
+def test_streak_table_does_not_depend_on_the_selection():
+    """Each streak's measurement is its own: measured alone or with all the others of the
+    frame (whatever a screen keeps), it gives the same numbers."""
+    from raingauge.gauge.streaks import measure_streak_table
+
+    rng = np.random.default_rng(9)
+    shape = (150, 220)
+    img = np.zeros(shape)
+    for x0, dx, w in ((20.3, 0.0, 3.0), (31.7, 4.0, 5.0), (90.2, 20.0, 6.5), (150.5, 0.0, 1.6), (190.0, -6.0, 9.0)):
+        img += capsule_change(shape, x0=x0, y0=15.0 + x0 / 10, dx=dx, dy=90.0, width=w, contrast=140.0)
+    frames = [rng.normal(50.0, 2.0, shape).astype(np.float32) for _ in range(3)]
+    frames[1] += img.astype(np.float32)
+    spike = np.minimum(frames[1] - frames[0], frames[1] - frames[2])
+    labels, stats = detect_streaks(spike, c=3.0)
+    sel = np.nonzero(stats[:, 4] > 0)[0]
+    assert sel.size >= 4
+    kw = dict(cur=frames[1], prev=frames[0], noise_sigma=2.0 * math.sqrt(1.5))
+    together = measure_streak_table(tuple(frames), labels, stats, sel, **kw)
+    for i, lab in enumerate(sel):
+        alone = measure_streak_table(tuple(frames), labels, stats, [lab], **kw)
+        for key in ("xm", "slope", "width_apparent", "motion", "plateau", "background_dn", "chi2"):
+            np.testing.assert_allclose(alone[key], together[key][i:i + 1], rtol=1e-9, err_msg=key)
+        mine = together["own_k"] == i
+        np.testing.assert_array_equal(alone["own_y"], together["own_y"][mine])
+        np.testing.assert_array_equal(alone["own_x"], together["own_x"][mine])

@@ -135,3 +135,158 @@ def test_volume_against_simulator_drops():
         g.flush()
         accepted = len(g.drops) == 1
         assert accepted == (p > 0.5), (z, p, len(g.drops))
+
+
+def _round_trip(profile, diameter_m, *, n_frames, background_dn, drop_brightness_dn, seed, cols=6, rows=2):
+    """Isolated drops of one size at random depths around z0, rendered by the simulator and
+    fed to the gauge between rain-free frames: (accepted, expected by the volume model, placed)."""
+    from raingauge.gauge import RainGauge
+    from raingauge.physics.drops import fall_velocity
+    from raingauge.render.simulator import compose_rain, render_streaks, streak_capsules
+
+    rng = np.random.default_rng(seed)
+    f, z0, T = profile.focal_length_px, profile.focus_distance_m, profile.exposure_s
+    a = 0.5 * diameter_m
+    v = float(fall_velocity(diameter_m, model="gunn_kinzer"))
+    contrast = drop_brightness_dn - background_dn
+    # depths: where the model accepts anything, widened by a third on each side
+    zz = np.linspace(0.85 * z0, 1.2 * z0, 700)
+    pz = pass_probability(a, zz, profile, velocity_model="gunn_kinzer", contrast_dn=contrast)["p"]
+    on = zz[pz > 1e-3]
+    half = 0.5 * (on[-1] - on[0])
+    lo, hi = on[0] - 0.3 * half, on[-1] + 0.3 * half
+    M, N = profile.shape
+    gauge = RainGauge(profile, velocity_model="gunn_kinzer", window_s=1e3, step_s=1e3, keep_drops=True)
+    gauge._brightness.extend([drop_brightness_dn] * 40)       # the drop brightness, as if measured
+    bg = np.full(profile.shape, background_dn, np.float32)
+    n = cols * rows
+    k = 0
+
+    def feed(lin):
+        nonlocal k
+        noisy = lin + rng.normal(0.0, profile.noise_sigma_dn, lin.shape)
+        gauge.process(np.clip(np.rint(noisy), 0, 255).astype(np.uint8), t_s=k / profile.frame_rate_hz)
+        k += 1
+
+    placed = []
+    feed(bg)
+    for _ in range(n_frames):
+        z = rng.uniform(lo, hi, n)
+        cx = (np.arange(n) % cols + rng.uniform(0.3, 0.7, n)) * N / cols
+        cy = (np.arange(n) // cols + rng.uniform(0.35, 0.65, n)) * M / rows
+        start = np.column_stack([(cx - profile.principal_point[0]) * z / f,
+                                 (cy - profile.principal_point[1]) * z / f - 0.5 * v * T, z])
+        caps = streak_capsules(start, start + np.array([0.0, v * T, 0.0]), np.full(n, a), focal_length_px=f,
+                               principal_point_px=profile.principal_point, f_number=profile.f_number,
+                               focus_distance_m=z0, pixel_pitch_m=profile.pixel_pitch_m)
+        beta, _ = render_streaks(profile.shape, caps["p0"], caps["p1"], caps["radius_px"], caps["area_px"])
+        placed.append((k, cx, cy, z))
+        feed(compose_rain(bg.copy(), beta, drop_brightness_dn=drop_brightness_dn))
+        feed(bg)
+    gauge.flush()
+    by_frame = {}
+    for d in gauge.drops:
+        by_frame.setdefault(int(round(d["t"] * profile.frame_rate_hz)), []).append(d)
+    accepted, expected = 0, 0.0
+    for frame_k, cx, cy, z in placed:
+        expected += float(pass_probability(a, z, profile, velocity_model="gunn_kinzer",
+                                           contrast_dn=contrast)["p"].sum())
+        for d in by_frame.get(frame_k, []):
+            if np.min(np.hypot(cx - d["x"], cy - d["y"])) < 6.0:
+                accepted += 1
+    return accepted, expected, n * n_frames
+
+
+@pytest.mark.parametrize("diameter_mm, noise, background_dn, drop_dn", [
+    (0.55, 1.0, 40.0, 200.0),      # a streak of ~1.5 px: the pixel grid limits its sizing
+    (0.85, 3.0, 40.0, 200.0),      # faint against the noise: wide tolerance, loose focus
+    (1.5, 2.0, 40.0, 200.0),
+    (1.0, 1.0, 150.0, 250.0),      # a bright background: less contrast
+])
+def test_round_trip_accepted_fraction_equals_pass_probability(diameter_mm, noise, background_dn, drop_dn):
+    """The sample volume is the accepted fraction: drops of one size placed at random depths
+    around z0 (rendered by the simulator's Eqs. 15-24, isolated, whole in the frame) are
+    accepted by the gauge as often as the volume model's pass probability says, within
+    the counting error (3 sigma of the binomial count plus 10 % of the model's calibration)."""
+    prof = CAM.replace(noise_sigma_dn=noise)
+    accepted, expected, placed = _round_trip(prof, diameter_mm * 1e-3, n_frames=14, background_dn=background_dn,
+                                             drop_brightness_dn=drop_dn, seed=int(diameter_mm * 100 + noise))
+    assert expected > 20
+    p = expected / placed
+    sigma = math.sqrt(placed * p * (1 - p))
+    assert abs(accepted - expected) <= 3 * sigma + 0.1 * expected, (accepted, expected, placed)
+
+
+def test_contrast_sets_which_sizes_are_seen():
+    """Eqs. (17)-(19): a drop's streak changes its pixels by beta (E_r - E_b); with less
+    contrast the small drops vanish first, while the large ones are still sampled."""
+    vol = SampleVolume(CAM, velocity_model="gunn_kinzer")
+    a = np.array([0.3e-3, 1.5e-3])
+    dark = vol.kappa(a, 160.0)
+    dim = vol.kappa(a, 80.0)
+    none = vol.kappa(a, 1.5)
+    assert np.all(dark > 0)
+    assert dim[0] < 0.05 * dark[0] and dim[1] > 0.5 * dark[1]
+    assert np.all(none < 1e-6 * dark)
+
+
+def test_frame_volume_averages_its_backgrounds(volume):
+    """A frame half dark, half as bright as the drops samples each size in the mean of the
+    two volumes: the visible half counts, the invisible half does not (no sizes lost, none
+    inflated)."""
+    from raingauge.gauge.volume import background_histogram
+
+    frame = np.full((240, 320), 40.0, np.float32)
+    frame[:, 160:] = 199.0
+    hist = background_histogram(frame)
+    assert hist.sum() == frame[::8, ::8].size
+    w = volume.histogram_weights(hist, 200.0)
+    a = np.array([0.4e-3, 1.0e-3])
+    # the nearest grid contrasts of 160 and ~1 gray levels
+    dark_only = volume.histogram_weights(background_histogram(np.full((240, 320), 40.0, np.float32)), 200.0)
+    assert volume.kappa(a, weights=w) == pytest.approx(0.5 * volume.kappa(a, weights=dark_only), rel=1e-9)
+    assert volume.visible_fraction(a, weights=w) == pytest.approx(
+        0.5 * volume.visible_fraction(a, weights=dark_only), rel=1e-9)
+
+
+def test_hidden_share_from_the_background(volume):
+    """Against a dark background every measurable size is visible (nothing hidden); against a
+    background as bright as the drops nothing is, and the share of the rate hidden is all."""
+    from raingauge.gauge.volume import background_histogram
+
+    dark = volume.histogram_weights(background_histogram(np.full((240, 320), 40.0)), 200.0)
+    d_det, share = volume.hidden_share(dark, 10.0)
+    assert share < 0.01 and d_det <= 2.2 * volume.min_radius_m
+    bright = volume.histogram_weights(background_histogram(np.full((240, 320), 200.0)), 200.0)
+    d_det, share = volume.hidden_share(bright, 10.0)
+    assert share == 1.0 and math.isinf(d_det)
+
+
+def test_gauge_says_when_no_drop_can_be_seen():
+    """A background as bright as the drops hides every size: the record flags it and gives
+    no upper limit, instead of a confident zero."""
+    from raingauge.gauge import RainGauge
+
+    prof = CAM.replace(noise_sigma_dn=1.0)
+    rng = np.random.default_rng(3)
+    gauge = RainGauge(prof, velocity_model="gunn_kinzer", window_s=1.0, step_s=1.0)
+    recs = []
+    for k in range(20):
+        frame = np.clip(np.rint(205.0 + rng.normal(0, 1.0, prof.shape)), 0, 255).astype(np.uint8)
+        recs += gauge.process(frame)
+    recs += gauge.flush()
+    rec = recs[-1]
+    assert "no_visible_drops" in rec["quality"]
+    assert rec["rain_rate_ci95_mm_h"][1] is None
+
+
+def test_noisier_frames_sample_small_drops_less(volume):
+    """In heavy rain the flicker of the faint defocused drops (Eq. 27) adds to the sensor's
+    noise: the small drops' streaks sink into it and their sample volume shrinks, while
+    the large ones are still sampled."""
+    base = volume.noises_dn[0]
+    a = np.array([0.3e-3, 2.0e-3])
+    quiet = volume.kappa(a, noise_dn=base)
+    noisy = volume.kappa(a, noise_dn=3.0 * base)
+    assert noisy[0] < 0.5 * quiet[0]
+    assert noisy[1] > 0.7 * quiet[1]

@@ -151,3 +151,124 @@ def test_detect_streaks_on_synthetic_rain_recall_and_precision():
         assert all(s.accepted for s in streaks.accepted_only())
     # Streaks overlapping other streaks of the neighbouring frames are missed (note 16).
     assert np.mean(rec) > 0.8 and np.mean(prec) > 0.95
+
+
+# ------------------------------------------------- the slope test given the noise
+def _faint_streak(seed, *, amp=4.0, beta=0.01, sigma=1.0, length=20, lo=20.0, hi=24.0):
+    """A streak of ``amp`` gray levels (Eq. 18, slope beta) on a low-contrast texture, noise sigma per frame."""
+    rng = np.random.default_rng(seed)
+    bg = texture((40, 40), seed=seed, lo=lo, hi=hi, blur=1.0)
+    m = streak_mask(bg.shape, 20, 20, length, 95, width=2)
+    frames = [bg + rng.normal(0, sigma, bg.shape).astype(np.float32) for _ in range(3)]
+    frames[1][m] += amp + beta * (bg[m].mean() - bg[m])
+    return frames, m
+
+
+def test_faint_streaks_of_four_gray_levels_in_unit_noise_are_accepted():
+    # c = 3, hysteresis down to 2 sigma: the pixels found of a 4-DN streak are
+    # kept by Eq. (18).  Their background varies by a few noise levels only, so
+    # the slope is barely measurable and the threshold that picked the pixels
+    # biases it negative; a cut on the scatter of the selected pixels alone
+    # rejected about one such streak in ten.
+    from raingauge.vision import hysteresis_candidates
+
+    kept, found = 0, 0
+    for seed in range(40):
+        frames, m = _faint_streak(seed)
+        cand = hysteresis_candidates(*frames, c=3.0, c_low=2.0)
+        acc, fits = photometric_filter(*frames, cand, beta_max=beta_max_for_exposure(1 / 30), noise_sigma=1.0)
+        found += (cand & m).sum()
+        kept += (acc & m).sum()
+        assert (acc & m).sum() >= 0.5 * (cand & m).sum()      # every streak is accepted
+    assert kept >= 0.98 * found and found >= 0.8 * 40 * m.sum()
+
+
+def test_bright_blob_whose_change_grows_with_background_is_rejected():
+    # A reflection brightening the scene by 15 %: Delta I = 0.15 I_b, beta = -0.15 (Eq. 18 needs beta >= 0).
+    rng = np.random.default_rng(2)
+    bg = texture((80, 80), seed=2, lo=40, hi=220)
+    m = streak_mask(bg.shape, 40, 40, 40, 95, width=3)
+    frames = [bg + rng.normal(0, 1.0, bg.shape).astype(np.float32) for _ in range(3)]
+    frames[1][m] += 0.15 * bg[m]
+    cand = candidates(*frames, c=3.0)
+    acc, fits = photometric_filter(*frames, cand, beta_max=beta_max_for_exposure(1 / 30), noise_sigma=1.0)
+    big = np.argmax(fits.area)
+    assert fits.beta[big] == pytest.approx(-0.15, abs=0.02)
+    assert not fits.slope_ok[big] and not acc[m].any()
+    # the same blob, 12 gray levels at most, in the noise of a gauge camera (sigma 2): still refuted
+    frames = [bg + rng.normal(0, 2.0, bg.shape).astype(np.float32) for _ in range(3)]
+    frames[1][m] += 0.055 * bg[m]
+    cand = candidates(*frames, c=3.0)
+    acc, fits = photometric_filter(*frames, cand, beta_max=beta_max_for_exposure(1 / 30), noise_sigma=2.0)
+    assert acc[m].sum() < 0.1 * m.sum()
+
+
+def test_selection_pull_matches_monte_carlo_of_the_spike_test():
+    from raingauge.vision.photometric import selection_pull
+
+    rng = np.random.default_rng(0)
+    sigma, c = 1.0, 3.0
+    for s in (3.0, 4.41, 5.83):        # true change at c, one and two noise levels sqrt(2) sigma above
+        e_prev = rng.normal(0, sigma, 400_000)
+        e_cur = rng.normal(0, sigma, 400_000)
+        sel = s + e_cur - e_prev >= c
+        margin = (s - c) / (math.sqrt(2.0) * sigma)
+        assert -e_prev[sel].mean() == pytest.approx(float(selection_pull(margin)) * sigma, abs=0.01)
+    assert float(selection_pull(0.0)) == pytest.approx(math.sqrt(2 / math.pi) / math.sqrt(2.0) * 1.0, rel=1e-6)
+    assert float(selection_pull(-3.0)) == float(selection_pull(0.0))     # below the threshold: the value at it
+    assert float(selection_pull(6.0)) < 1e-6
+
+
+def test_slope_uncertainty_noise_floor_flat_background_and_bright_streaks():
+    from raingauge.vision.photometric import slope_uncertainty
+
+    # a line fitted exactly (rss = 0) is still uncertain by the noise of y, 2 sigma^2
+    se, shift = slope_uncertainty(np.array([50.0]), np.array([0.0]), np.array([10.0]), np.array([0.0]),
+                                  noise_sigma=1.5)
+    assert se[0] == pytest.approx(math.sqrt(2 * 1.5 ** 2 / 50.0)) and shift[0] == 0.0
+    # a larger residual than the noise is used as it is
+    se, _ = slope_uncertainty(np.array([50.0]), np.array([80.0]), np.array([10.0]), np.array([0.0]), noise_sigma=1.0)
+    assert se[0] == pytest.approx(math.sqrt(80.0 / 8 / 50.0))
+    # no background contrast: no slope can be measured
+    se, shift = slope_uncertainty(np.array([0.0]), np.array([1.0]), np.array([10.0]), np.array([2.0]), noise_sigma=1.0)
+    assert math.isinf(se[0]) and math.isinf(shift[0])
+    with pytest.raises(ValueError, match="noise_sigma"):
+        slope_uncertainty(np.ones(1), np.ones(1), np.ones(1), np.ones(1), noise_sigma=float("nan"))
+    # bright streaks (40 DN on unit noise) get no selection allowance: beta = 0.01 is kept, -0.1 refuted
+    for beta, ok in ((0.01, True), (-0.1, False)):
+        frames, m = _faint_streak(0, amp=40.0, beta=beta, lo=40.0, hi=200.0)
+        fits = fit_streaks(*frames, candidates(*frames, c=3.0), beta_max=0.3, noise_sigma=1.0)
+        big = np.argmax(fits.area)
+        assert fits.beta[big] == pytest.approx(beta, abs=0.01)
+        assert bool(fits.accepted[big]) is ok
+
+
+def test_slope_error_is_cluster_robust_over_blocks_of_pixels():
+    # Residuals shared by blocks of pixels (the partly covered edge of a streak, two
+    # drops in one component) make the independent-pixel error too small; for a
+    # streak that error refutes (here beta = -0.05) the sandwich variance over
+    # 8 x 8 blocks, computed here by hand, is used instead.
+    rng = np.random.default_rng(4)
+    shape = (40, 40)
+    x = texture(shape, seed=4, lo=30, hi=90)
+    m = np.zeros(shape, bool)
+    m[4:36, 10:14] = True
+    rows, cols = np.nonzero(m)
+    block_err = rng.normal(0, 2.0, (5, 5))[rows // 8, cols // 8]
+    y = np.zeros(shape, np.float32)
+    y[m] = 20.0 + 0.05 * x[m] + block_err + rng.normal(0, 0.2, m.sum())
+    nxt = np.zeros(shape, np.float32)
+    fits = fit_streaks(x, y, nxt, m, beta_max=0.3, noise_sigma=0.0, min_pixels=5, cluster_px=8)
+    fits_iid = fit_streaks(x, y, nxt, m, beta_max=0.3, noise_sigma=0.0, min_pixels=5, cluster_px=0)
+    xs, ys = x[m].astype(np.float64), y[m].astype(np.float64)
+    sxx = np.sum((xs - xs.mean()) ** 2)
+    slope, icpt = np.polyfit(xs, ys, 1)
+    r = ys - (icpt + slope * xs)
+    var_iid = np.sum(r ** 2) / (xs.size - 2) / sxx
+    blocks = (rows // 8) * 5 + cols // 8
+    g = np.array([np.sum(r[blocks == b] * (xs[blocks == b] - xs.mean())) for b in np.unique(blocks)])
+    var_cr = g.size / (g.size - 1) * np.sum(g ** 2) / sxx ** 2
+    assert var_cr > 2 * var_iid and -slope + 2 * math.sqrt(var_iid) < 0
+    assert fits.beta[0] == pytest.approx(-slope, rel=1e-4)
+    assert fits.beta_se[0] == pytest.approx(math.sqrt(var_cr), rel=1e-3)
+    assert fits_iid.beta_se[0] == pytest.approx(math.sqrt(var_iid), rel=1e-3)

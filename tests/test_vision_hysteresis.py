@@ -129,3 +129,17 @@ def test_mask_shift_matches_opencv_nearest():
     kept = _drop_isolated(lone, 5)
     assert not kept[2, 2] and kept[6, 6] and kept[7, 7]
     np.testing.assert_array_equal(_drop_isolated(lone, 1), lone)
+
+
+def test_hysteresis_faint_pixel_beyond_tolerance_links_the_streak_but_is_no_candidate():
+    # A faint streak: one pixel at c, the rest at 2 DN; one faint pixel midway has
+    # neighbours that disagree.  Dropped before the labelling it would cut the
+    # streak and lose the far half (no pixel at c there); it still links, but
+    # is not a candidate itself ((I_{n-1} + I_{n+1}) / 2 is no background there).
+    prev, cur, nxt = _triplet({(5, k): (4.0 if k == 5 else 2.0) for k in range(5, 15)})
+    nxt[5, 9] -= 1.0
+    got = hysteresis_candidates(prev, cur, nxt, c=3.0, c_low=1.5, tol=0.5)
+    assert got[5, 5:9].all() and got[5, 10:15].all() and not got[5, 9]
+    assert got.sum() == 9
+    nxt[5, 5] -= 1.0                                     # the only anchor fails the tolerance
+    assert not hysteresis_candidates(prev, cur, nxt, c=3.0, c_low=1.5, tol=0.5).any()

@@ -121,3 +121,89 @@ def test_temporal_median_and_mog2_baselines():
     masks = [det.apply(f) for f in scene]
     assert masks[30][10:20, 5:13].mean() > 0.9               # MOG2 calls the object "rain" too
     assert masks[30][25:, 20:].mean() < 0.05
+
+
+def _crossing(bright=4.5, faint=2.5, seed=0):
+    """A faint streak of frame n crossed by a fainter drop of frame n+1: 7 frames, the streak, the crossing.
+
+    At the crossing I_n - I_{n+1} = bright - faint < c = 3: Eq. (19) leaves a gap.
+    """
+    rng = np.random.default_rng(seed)
+    bg = texture((40, 40), seed=3, lo=40, hi=80)
+    lum = [bg + rng.normal(0, 0.3, bg.shape).astype(np.float32) for _ in range(7)]
+    streak = np.zeros(bg.shape, bool)
+    streak[5:30, 20:22] = True
+    lum[3][streak] += bright
+    cross = np.zeros(bg.shape, bool)
+    cross[15:18, 14:28] = True                          # a drop of frame n+1 across it
+    lum[4][cross] += faint
+    return lum, streak, cross
+
+
+def test_multi_frame_hits_fill_the_gap_where_a_faint_drop_crosses_a_streak():
+    from raingauge.vision.removal import ArrayWindow, multi_frame_hits
+
+    lum, streak, cross = _crossing()
+    gap = streak & cross
+    b = streak & ~gap                                    # Eq. (19) misses the crossing: I_n - I_{n+1} < c there
+    win = ArrayWindow(lum, lum)
+    flat, before, after = multi_frame_hits(win, b, c=3.0, tol=1.5, beta_max=0.3, noise_sigma=0.3)
+    found = np.zeros(b.shape, bool)
+    found.ravel()[flat] = True
+    assert found[gap].all() and not found[~streak].any()
+    assert set(before) == {2} and set(after) == {5}      # background from frames n-1 and n+2
+    # the paper's rule (every frame of the run c above the unaffected ones) leaves the gap
+    flat, _, _ = multi_frame_hits(win, b, c=3.0, tol=1.5, beta_max=0.3, noise_sigma=0.3, near_px=0)
+    assert not np.isin(np.flatnonzero(gap.ravel()), flat).any()
+    # and without a detected streak next to it, a lone faint pair is left alone
+    flat, _, _ = multi_frame_hits(win, np.zeros_like(b), c=3.0, tol=1.5, beta_max=0.3, noise_sigma=0.3)
+    assert flat.size == 0
+
+
+def test_remove_rain_fills_the_crossing_with_the_unaffected_frames():
+    lum, streak, cross = _crossing()
+    gap = streak & cross
+    region = np.ones(streak.shape, bool)
+    out, replaced = remove_rain(lum, lum, streak & ~gap, region, c=3.0, grow_px=0, tol=1.5, beta_max=0.3,
+                                noise_sigma=0.3, near_px=2)
+    assert replaced[streak].all() and not replaced[~streak].any()
+    expect = 0.5 * (lum[2] + lum[5])
+    np.testing.assert_allclose(out[gap], expect[gap], atol=1e-4)
+    _, replaced = remove_rain(lum, lum, streak & ~gap, region, c=3.0, grow_px=0, tol=1.5, beta_max=0.3,
+                              noise_sigma=0.3)
+    assert not replaced[gap].any()                       # the paper's rule, the default
+
+
+def test_one_frame_rain_pixel_with_disagreeing_neighbours_is_not_given_their_mean():
+    # (I_{n-1} + I_{n+1}) / 2 is the background only when the two agree (Eq. 19);
+    # here a drop brightened frame n+1 too, and the mean would keep half of it.
+    lum = _window()
+    rain = np.zeros(lum[3].shape, bool)
+    rain[5:15, 5] = True
+    for k in range(7):
+        lum[k] = lum[k].copy()
+    lum[3][rain] += 20.0
+    lum[4][5:15, 5] += 8.0                               # the neighbour disagrees by 8 > tol
+    region = np.ones(rain.shape, bool)
+    out, replaced = remove_rain(lum, lum, rain, region, c=3.0, grow_px=0, tol=2.0)
+    # a 2-frame run [n, n+1]: the background comes from frames n-1 and n+2
+    np.testing.assert_allclose(out[rain], 80.0)
+    _, replaced = remove_rain(lum, lum, rain, region, c=3.0, grow_px=0, tol=2.0, runs=False)
+    assert not replaced.any()
+    out, replaced = remove_rain(lum, lum, rain, region, c=3.0, grow_px=0, tol=None, runs=False)
+    np.testing.assert_allclose(out[rain], 84.0)         # without a tolerance: the paper's mean
+
+
+def test_window_run_candidates_match_the_run_prefilter_of_every_rise_and_fall():
+    from raingauge.vision.removal import ArrayWindow
+
+    rng = np.random.default_rng(1)
+    lum = [rng.normal(100, 2.0, (60, 80)).astype(np.float32) for _ in range(7)]
+    for k in (2, 3, 4):
+        lum[k][10:30, 20:23] += 15.0                      # a 3-frame run [n-1, n+1]
+    win = ArrayWindow(lum, lum)
+    rises = [lum[k] - lum[k - 1] >= 3.0 for k in range(1, 6)]
+    falls = [lum[k] - lum[k + 1] >= 3.0 for k in range(1, 6)]
+    expect = run_prefilter(rises, falls)
+    np.testing.assert_array_equal(win.run_candidates(3.0), expect)
+    assert expect[12:28, 21].all()

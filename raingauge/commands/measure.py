@@ -8,7 +8,9 @@ stderr.  A video shorter than one window gives one record over what there is,
 flagged "partial_window".
 
 Record fields: t_start_s, t_end_s, rain_rate_mm_h, rain_rate_ci95_mm_h
-([lo, hi], 95 % interval from the counting statistics), accumulation_mm,
+([lo, hi], 95 % interval from the counting statistics, widened for drop sizes
+too faint to see against the background; hi is null when no size is visible,
+flagged "no_visible_drops"), accumulation_mm,
 drops_counted, drops_rejected_defocus, dsd_d_mm and dsd_n_m3_mm (N(D) in the
 32 Parsivel classes, m^-3 mm^-1), nt_m3, dm_mm, z_dbz, intensity_class,
 synop_4680, quality (flags), then nw_mm1_m3, lwc_g_m3, ke_flux_j_m2_h, z_mm6_m3,

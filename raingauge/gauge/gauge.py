@@ -23,19 +23,29 @@ the streaks' boxes) on the change divided by the local contrast E_r - I_b
 the whole-streak test, the velocity-law test, the photometric test of
 Eq. (18) where the background has texture, the cross-profile test (a streak
 is one positive box across; moving scenery leaves two-signed changes), the
-photometric focus test (:mod:`raingauge.gauge.rejection`), and flux
-counting: a drop already counted in one of the last frames (predicted from
-its measured image velocity) is not counted again.  The ``pillbox`` defocus
+photometric focus test (:mod:`raingauge.gauge.rejection`), and tracks: a
+drop seen in an earlier frame (predicted from the image velocity both
+sightings measure, over the real time between the frames) continues its
+track.  The ``pillbox`` defocus
 model keeps the fitted measurement (:class:`raingauge.gauge.streaks.StreakProps`),
 which separates blur from width.
 
-Each counted drop carries the inverse of the space-time its kind is sampled in
-(:mod:`raingauge.gauge.volume`): kappa(a) times the rate at which whole
-streaks of its image motion are seen, times the chance that a streak of its
-shape would not have touched another detected streak in this frame (merged
-streaks cannot be measured; the chance is measured by placing the streak's
-own pixels at random in the frame's detection mask).  A window of counted
-drops gives the products (:mod:`raingauge.gauge.products`).  Drops too faint
+Every analysed frame is a snapshot of the sample volume.  Each accepted streak
+carries Delta / (kappa(a) A_R (1 - p)) [s m^-3] (:mod:`raingauge.gauge.volume`):
+kappa(a) the volume per image pixel in which the tests accept a drop of radius
+a in one frame, A_R the area in which its streak lies whole, p the chance that
+another streak of the frame touched it (:func:`merge_probability`, Poisson
+coverage from the frame's measured streak density; merged or hidden streaks
+are not measured).  So each frame estimates the density over one frame period
+Delta, and a window's rate divides by the frames actually analysed: frames
+missing from the stream (``dropped_frames``) leave the rate unbiased, and a
+drop accepted in some of the frames that show it whole weighs what kappa says
+(counting it once per stream would favour drops with several chances).  The
+tracks make the counting statistics (``drops_counted``, the interval) those of
+distinct drops.  The accumulation fills gaps of up to :data:`MAX_FILLED_GAP_S`
+with the rain of the frames on either side; frames around a longer outage are
+not analysed.  A window of counted drops gives the products
+(:mod:`raingauge.gauge.products`).  Drops too faint
 against the window's background (Eq. 18: beta (E_r - I_b) under the detection
 threshold or under twice the noise) are missing from the count: the record
 gives the smallest diameter seen (``min_detectable_diameter_mm``), flags
@@ -62,8 +72,10 @@ from raingauge.gauge import products as _products
 from raingauge.gauge.rejection import (
     exposure_area_px2,
     passes_blur,
+    change_noise_dn,
     passes_velocity_law,
     photometric_focus,
+    streak_errors_px,
     velocity_log_ratio,
 )
 from raingauge.gauge.streaks import (
@@ -77,10 +89,12 @@ from raingauge.gauge.volume import (
     DEFOCUS_MODELS,
     EDGE_MARGIN_PX,
     SampleVolume,
+    background_histogram,
     effective_area_rate_px2_s,
+    whole_streak_area_px2,
 )
 
-__all__ = ["RainGauge", "RECORD_KEYS", "QUALITY_FLAGS"]
+__all__ = ["RainGauge", "RECORD_KEYS", "QUALITY_FLAGS", "merge_probability"]
 
 #: Drop brightness E_r assumed before any drop was measured [gray levels] (an overcast
 #: sky seen through the drop, Sec. 4.2.3), only for the ``low_contrast`` flag.
@@ -99,6 +113,22 @@ MEASURABLE_SNR = 2.0
 #: uniform box across it: drops read 1-4, the two-signed changes of moving scenery 15-600.
 MAX_CROSS_CHI2 = 8.0
 
+#: Longest span [s] between a frame and either neighbour over which the three-frame test of
+#: Eq. (19) is still applied: across a longer outage the scene (light, wet surfaces) may
+#: change, so the frames on either side of it are not analysed (and not counted as observed).
+MAX_TRIPLE_GAP_S = 1.0
+
+#: Longest gap [s] between analysed frames whose rain is filled into the accumulation from
+#: the frames on either side of it; a longer outage is left out of the accumulation (flagged
+#: ``dropped_frames``).
+MAX_FILLED_GAP_S = 1.0
+
+#: Smallest sample volume, relative to the largest over all sizes (for the same frame), in
+#: which a drop is still counted [-]: kappa(a) falls to zero at the ends of the measurable
+#: sizes, and a drop sized there (or a false streak sized there) would carry an unbounded
+#: weight 1 / kappa (one such streak on a textured scene read 5e8 mm/h).
+KAPPA_FLOOR_REL = 0.02
+
 #: The record contract (the keys every record carries, in order).
 RECORD_KEYS: tuple[str, ...] = (
     "t_start_s", "t_end_s", "rain_rate_mm_h", "rain_rate_ci95_mm_h", "accumulation_mm",
@@ -114,7 +144,10 @@ QUALITY_FLAGS: dict[str, str] = {
     "underexposed": "dark frames: drops are too faint to measure",
     "scene_motion": "strong scene or camera motion: many one-frame changes that are not rain",
     "lens_obscured": "sudden loss of sharpness: water or dirt on the lens",
-    "dropped_frames": "gaps in the frame timestamps",
+    "dropped_frames": "gaps in the frame timestamps (the rate is over the frames observed; frames around "
+                      "an outage longer than MAX_TRIPLE_GAP_S are not analysed)",
+    "no_visible_drops": "no drop size is bright enough against the background to be seen: the rate "
+                        "is not measured (the interval has no upper limit)",
     "low_contrast": "drops barely brighter than the background: small drops are missed, the rate reads "
                     "low (the interval's upper limit covers them; see min_detectable_diameter_mm)",
 }
@@ -135,6 +168,45 @@ def _sample_volume(profile, velocity_model: str, defocus_model: str) -> SampleVo
             _VOLUMES.clear()
         _VOLUMES[key] = SampleVolume(profile, velocity_model=velocity_model, defocus_model=defocus_model)
     return _VOLUMES[key]
+
+
+def merge_probability(width_px, height_px, other_widths_px, other_heights_px, shape, *,
+                      self_included=None) -> np.ndarray:
+    """Chance that a streak touches another one in the same frame [-] (Poisson coverage).
+
+    Streaks lie in the frame as a Poisson germ-grain process: with lambda the density of
+    streaks and G their shapes, a streak S is touched by none with probability
+    exp(-lambda E|S (+) G|) [Hall1988], (+) the Minkowski sum.  For boxes w x h grown by the
+    one pixel of 8-connectivity, |S (+) G| = (w_S + w_G + 2)(h_S + h_G + 2), and the frame's
+    own streaks measure lambda E|S (+) G| as sum_G |S (+) G| / (M N).  Merged or hidden
+    streaks are not measured, so the isolated ones are counted up by 1 / (1 - p).
+
+    Parameters
+    ----------
+    width_px, height_px : (K,) array_like
+        Boxes of the streaks whose chance is wanted [px].
+    other_widths_px, other_heights_px : (G,) array_like
+        Boxes of the frame's detected streaks (the density) [px].
+    shape : (M, N)
+        Frame shape [px].
+    self_included : (K,) bool array_like, optional
+        Whether each streak is itself among the others (its own term is then removed).
+
+    Returns
+    -------
+    (K,) ndarray [-], capped at 0.8 (a frame that crowded measures little)
+    """
+    ws = np.asarray(width_px, dtype=float) + 2.0
+    hs = np.asarray(height_px, dtype=float) + 2.0
+    wg = np.asarray(other_widths_px, dtype=float)
+    hg = np.asarray(other_heights_px, dtype=float)
+    M, N = shape
+    n = wg.size
+    total = n * ws * hs + ws * hg.sum() + hs * wg.sum() + float(np.sum(wg * hg))
+    if self_included is not None:
+        own = np.asarray(self_included, bool)
+        total = total - np.where(own, (ws + ws - 2.0) * (hs + hs - 2.0), 0.0)
+    return np.minimum(1.0 - np.exp(-np.maximum(total, 0.0) / float(M * N)), 0.8)
 
 
 class RainGauge:
@@ -213,11 +285,16 @@ class RainGauge:
         self._n_in = 0
         self._frames: deque = deque()                   # (t, flags, rejected)
         self._window_drops: deque = deque()             # (t, D, v, weight)
-        self._recent: deque = deque()                   # counted drops for de-duplication
+        self._recent: deque = deque()                   # tracks of the drops seen in the last frames
+        self._n_tracks = 0
         self._next_boundary = self.clock_start_s + self.step_s
         self._emitted = 0
         self._accum_mm = 0.0
         self._last_t = None
+        self._t_in = None                               # time of the last frame fed
+        self._t_decided = None                          # time of the last frame whose drops were counted
+        self._prev_counted: list = []                   # the drops of that frame
+        self._gaps: deque = deque()                     # (t_before, t_after) of gaps in the frame times
         self._sharpness: deque = deque(maxlen=int(max(10 * profile.frame_rate_hz, 10)))
         self._brightness: deque = deque(maxlen=400)     # E_r estimates of law-abiding streaks
         #: why measured streaks were not counted (diagnostics)
@@ -240,7 +317,9 @@ class RainGauge:
         frame : (M, N) or (M, N, 3) array
             8-bit frame (BGR colour is converted to luminance) of the profile's shape.
         t_s : float, optional
-            Time of the frame [s] (default ``clock_start_s + index / frame_rate``).
+            Capture time of the frame [s] (default ``clock_start_s + index / frame_rate``);
+            times must increase.  Pass them when frames may be missing: gaps are found from
+            the times, rounded to whole frame periods of the profile's frame rate.
         """
         frame = np.asarray(frame)
         if frame.ndim == 3:
@@ -259,6 +338,14 @@ class RainGauge:
         if t_s is None:
             t_s = self.clock_start_s + self._n_in / self.profile.frame_rate_hz
         t_s = float(t_s)
+        if not math.isfinite(t_s) or (self._t_in is not None and t_s <= self._t_in):
+            raise InputError(
+                f"frame time t_s = {t_s!r} s does not come after the previous frame's ({self._t_in!r} s); "
+                f"frame times must increase: pass each frame's capture time (or none, for "
+                f"index / frame rate)")
+        if self._t_in is not None and t_s - self._t_in > 1.5 * self._frame_interval:
+            self._gaps.append((self._t_in, t_s))
+        self._t_in = t_s
         self._n_in += 1
         lin = self.profile.linearize(frame)
         if lin.dtype != np.float32:
@@ -269,6 +356,10 @@ class RainGauge:
             (tp, prev, raw_p), (tc, cur, raw), (tn, nxt, raw_n) = self._buffer
             gap = (tc - tp > 1.5 * self._frame_interval) or (tn - tc > 1.5 * self._frame_interval)
             out.extend(self._emit_until(tc))
+            if tc - tp > MAX_TRIPLE_GAP_S or tn - tc > MAX_TRIPLE_GAP_S:
+                # the three-frame test across a long outage would compare different scenes:
+                # the frame is not analysed and not counted as observed time
+                return out
             raws = (raw_p, raw, raw_n) if self._linear_u8 else None
             self._analyse(prev, cur, nxt, raw, tc, gap, raws=raws)
         return out
@@ -286,8 +377,10 @@ class RainGauge:
         out.extend(self._emit_until(t_end - 1e-9))
         last_end = self._next_boundary - self.step_s
         if self._emitted == 0:
+            # one record over what there is; partial unless the stream filled a window
             t0 = self._frames[0][0]
-            out.append(self._record(t0, t_end, partial=True))
+            full = t_end - (t0 - self._frame_interval) >= self.window_s - 2.5 * self._frame_interval
+            out.append(self._record(t0, t_end, partial=not full))
             self._emitted += 1
         elif t_end - last_end >= 0.5 * self.step_s:
             # the tail of the stream after the last step: one more record, ending at the last frame
@@ -353,7 +446,18 @@ class RainGauge:
             spike = spike_image(prev, cur, nxt)
         # the change I_n - (I_{n-1} + I_{n+1}) / 2 is computed only where it is used
         change = (prev, cur, nxt)
-        flags = self._frame_flags(raw, cur, nxt[::2, ::2] - prev[::2, ::2], gap)
+        u8 = raws is not None and all(r.dtype == np.uint8 for r in raws)
+        if u8:
+            import cv2
+
+            # a linear 8-bit camera: |I_{n+1} - I_{n-1}| exactly, in 8 bits (only its size is used)
+            neighbour_change = cv2.absdiff(raws[2], raws[0])[::2, ::2]
+        else:
+            neighbour_change = nxt[::2, ::2] - prev[::2, ::2]
+        flags = self._frame_flags(raw, cur, neighbour_change, gap)
+        # the noise streaks are measured in: the sensor's and the flicker of rain too faint to
+        # detect (Eq. 27); it sets each streak's errors and the frame's sample volume
+        self._frame_noise_change = max(change_noise_dn(prev, cur, nxt), self.noise_change)
         slope = float(np.median(self._slopes)) if len(self._slopes) >= 5 else 0.0
         labels, stats = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope)
         rejected = 0
@@ -365,7 +469,16 @@ class RainGauge:
                 # Eq. (18): a streak changes a pixel by beta (E_r - I_b); dividing by the local
                 # contrast removes the background's texture from the streak's profile
                 e_r = float(np.percentile(np.asarray(self._brightness), 90))
-                ref_bg = float(np.median(0.5 * (prev[::4, ::4] + nxt[::4, ::4])))
+                if u8:
+                    # the same median from the histogram of the 8-bit sums I_{n-1} + I_{n+1}
+                    hist = np.bincount((raws[0][::4, ::4].astype(np.uint16) + raws[2][::4, ::4]).ravel(),
+                                       minlength=511)
+                    cum = np.cumsum(hist)
+                    n_px = int(cum[-1])
+                    lo_hi = np.searchsorted(cum, [(n_px - 1) // 2 + 1, n_px // 2 + 1])
+                    ref_bg = float(np.float32(0.25) * np.float32(lo_hi[0] + lo_hi[1]))
+                else:
+                    ref_bg = float(np.median(0.5 * (prev[::4, ::4] + nxt[::4, ::4])))
                 c_ref = e_r - ref_bg
                 if c_ref > 5.0 * self.c:
                     contrast = (e_r, c_ref)
@@ -378,7 +491,12 @@ class RainGauge:
                 prepared, rejected = self._measure(labels, stats, cur - 0.5 * (prev + nxt), prev, cur, t)
         else:
             prepared = []
-        entry = [t, flags, rejected, self._last_mean_bg]
+        # the backgrounds E_b behind the streaks (a neighbour frame): the drop sizes they leave
+        # visible set this frame's sample volume (raingauge.gauge.volume.SampleVolume.kappa)
+        entry = [t, flags, rejected, self._last_mean_bg, background_histogram(prev)]
+        for c in prepared:
+            c["bg_hist"] = entry[4]
+            c["noise_dn"] = self._frame_noise_change / math.sqrt(1.5)
         self._frames.append(entry)
         self._pending.append((entry, prepared))
         self._last_t = t
@@ -395,8 +513,21 @@ class RainGauge:
         else:
             e_r = float("nan")
         for entry, prepared in self._pending:
-            counted, rejected = self._decide(prepared, e_r)
+            # whole frame periods since the last analysed frame (timestamps jitter; frames drop
+            # whole): the first frame of the stream sees every drop as new
+            t = entry[0]
+            steps = (math.inf if self._t_decided is None
+                     else max(int(round((t - self._t_decided) / self._frame_interval)), 1))
+            self._t_decided = t
+            counted, rejected = self._decide(prepared, e_r, steps=steps)
             entry[2] += rejected
+            # the frame before the gap carries the other half of the unobserved periods
+            half = self._half_gap(steps)
+            for d in self._prev_counted:
+                extra = d["accum_base_mm"] * half
+                d["accum_mm"] += extra
+                self._accum_mm += extra
+            self._prev_counted = counted
             for d in counted:
                 self._window_drops.append(d)
                 self._accum_mm += d["accum_mm"]
@@ -460,8 +591,15 @@ class RainGauge:
             v_app = mot * z0 / (f * T)
             law = np.zeros(live.shape, bool)
             if live.any():
+                # each streak's own errors: its signal (back in gray levels where the change
+                # was divided by the local contrast) against the noise of the change
+                sig_scale = np.ones(live.shape) if contrast is None else np.nan_to_num(
+                    np.maximum(contrast[0] - tab["background_dn"], 0.25 * contrast[1]) / contrast[1], nan=1.0)
+                noise_ch = getattr(self, "_frame_noise_change", self.noise_change)
+                err_w, err_l = streak_errors_px(w_app, mot, plat * sig_scale, noise_ch)
                 law[live] = passes_velocity_law(a_app[live], v_app[live], w_app[live], mot[live],
-                                                model=self.velocity_model)
+                                                model=self.velocity_model, width_sigma_px=err_w[live],
+                                                motion_sigma_px=err_l[live])
         n_law = int(np.count_nonzero(live & ~law))
         self.rejections["velocity_law"] += n_law
         rejected += n_law
@@ -489,7 +627,7 @@ class RainGauge:
         focused = 4.0 * total / (math.pi * w_app[idx] ** 2)
         bright = np.isfinite(ib) & (w_app[idx] >= 2.5)
         self._brightness.extend((ib + focused)[bright].tolist())
-        p_over = (self._overlap_probabilities(labels, valid, tab, idx) if self.overlap_correction
+        p_over = (self._overlap_probabilities(labels, valid, tab, idx, stats=stats) if self.overlap_correction
                   else np.zeros(idx.size))
         prepared = []
         for n, k in enumerate(idx):
@@ -500,50 +638,23 @@ class RainGauge:
                              "slope": float(slope[k])})
         return prepared, rejected
 
-    def _overlap_probabilities(self, labels, valid, tab, idx) -> np.ndarray:
-        """For each streak in ``idx``: the chance that its own pixels, placed at random in this
-        frame, would touch another detected streak (and be merged with it) [-]."""
-        import cv2
+    def _overlap_probabilities(self, labels, valid, tab, idx, stats=None) -> np.ndarray:
+        """For each streak in ``idx``: the chance that another streak of this frame touches it
+        (and is merged with it, or hides it) [-], by :func:`merge_probability` over the frame's
+        detected streaks (their boxes are the measured density of the Poisson process)."""
+        if stats is None:
+            import cv2
 
-        M, N = labels.shape
-        k_all, oy_all, ox_all = tab["own_k"], tab["own_y"], tab["own_x"]
-        out = np.zeros(idx.size)
-        n_place = 24
-        pieces_k, pieces_y, pieces_x, own_share = [], [], [], []
-        for n, k in enumerate(idx):
-            m = k_all == k
-            ys, xs = oy_all[m], ox_all[m]
-            if ys.size == 0:
-                own_share.append(None)
-                continue
-            ys = ys - ys.min()
-            xs = xs - xs.min()
-            h, w = int(ys.max()) + 1, int(xs.max()) + 1
-            # the footprint grown by one pixel: it touches a streak where the grown one covers it
-            fp = np.zeros((h + 2, w + 2), np.uint8)
-            fp[ys + 1, xs + 1] = 1
-            ys, xs = np.nonzero(cv2.dilate(fp, np.ones((3, 3), np.uint8)))
-            ys, xs = ys - 1, xs - 1
-            if h >= M or w >= N:
-                own_share.append(None)
-                continue
-            n_own = int(np.count_nonzero(k_all == k))
-            oy = self._rng.integers(0, M - h + 1, n_place)
-            ox = self._rng.integers(0, N - w + 1, n_place)
-            pieces_k.append(np.repeat(n * n_place + np.arange(n_place), ys.size))
-            pieces_y.append((oy[:, None] + ys[None, :]).ravel())
-            pieces_x.append((ox[:, None] + xs[None, :]).ravel())
-            own_share.append(n_own * 9.0 / float(M * N))
-        if pieces_k:
-            pk = np.concatenate(pieces_k)
-            py = np.clip(np.concatenate(pieces_y), 0, M - 1)
-            px = np.clip(np.concatenate(pieces_x), 0, N - 1)
-            hit = valid[np.take(labels, py * N + px)]
-            hits = np.bincount(pk, hit, idx.size * n_place).reshape(idx.size, n_place) > 0
-            for n, share in enumerate(own_share):
-                if share is not None:
-                    out[n] = min(max(float(np.mean(hits[n])) - share, 0.0), 0.8)
-        return out
+            stats = cv2.connectedComponentsWithStats((labels > 0).astype(np.uint8), connectivity=8)[2]
+            valid = np.ones(stats.shape[0], bool)
+        stats = np.asarray(stats)
+        box_w = stats[:, 2].astype(float)
+        box_h = stats[:, 3].astype(float)
+        others = np.asarray(valid, bool).copy()
+        others[0] = False
+        others &= stats[:, 4] > 0
+        return merge_probability(box_w[idx], box_h[idx], box_w[others], box_h[others], labels.shape,
+                                 self_included=others[idx])
 
     def _measure(self, labels, stats, change, prev, cur, t, ref_bg=None):
         prof = self.profile
@@ -594,7 +705,8 @@ class RainGauge:
                 continue
             a_app = w_app * z0 / (2 * f)
             v_app = mot * z0 / (f * T)
-            if not bool(passes_velocity_law(a_app, v_app, w_app, mot, model=self.velocity_model)):
+            if not bool(passes_velocity_law(a_app, v_app, w_app, mot, model=self.velocity_model,
+                                            width_sigma_px=sp.width_err_px, motion_sigma_px=sp.motion_err_px)):
                 rejected += 1
                 self.rejections["velocity_law"] += 1
                 continue
@@ -625,18 +737,29 @@ class RainGauge:
                              "slope": sp.axis[2]})
         return prepared, rejected
 
-    def _decide(self, prepared: list, e_r: float) -> tuple[list, int]:
-        """Photometric focus, sizes, de-duplication and weights of one frame's candidates."""
+    def _decide(self, prepared: list, e_r: float, steps: float = 1) -> tuple[list, int]:
+        """Photometric focus, sizes, tracks and weights of one frame's candidates.
+
+        Every analysed frame is a snapshot of the sample volume: a drop whose streak is
+        whole in it weighs Delta / (kappa(a) A_R) (A_R the whole-streak area,
+        :func:`raingauge.gauge.volume.whole_streak_area_px2`), so each frame's weighted count
+        estimates the density over one frame period Delta, whatever the gap before it.
+        ``steps`` is the number of frame periods since the last analysed frame (``inf`` for
+        the first): the accumulation fills the unobserved periods with this frame's rain.
+        """
         prof = self.profile
         f = prof.focal_length_px
         z0 = prof.focus_distance_m
         T = prof.exposure_s
         counted = []
         rejected = 0
+        # the accumulation fills the unobserved frame periods before this frame, half with
+        # its rain, half with the rain of the frame before the gap (trapezoid rule)
+        fill = 1.0 + self._half_gap(steps)
+        if prepared:
+            self._prune_tracks(prepared[0]["t"])
         for c in prepared:
             t, w_app, mot, dx, xc, yc = c["t"], c["w_app"], c["mot"], c["dx"], c["xc"], c["yc"]
-            while self._recent and t - self._recent[0]["t"] > 4 * self._frame_interval + 1e-9:
-                self._recent.popleft()
             if c["photo"] is not None:
                 ib, total = c["photo"]
                 q = float(photometric_focus(total, w_app, e_r - ib)) if np.isfinite(e_r) else 1.0
@@ -649,25 +772,10 @@ class RainGauge:
                 a = w_true * float(self.volume.depth_m(a0)) / (2 * f)
             else:
                 a = float(self.volume.true_radius_m(w_app * z0 / (2 * f)))
-            # de-duplicate against drops counted in the last frames
-            dup = False
-            for r in self._recent:
-                dt = t - r["t"]
-                if dt <= 0:
-                    continue
-                px = r["x"] + r["ux"] * dt
-                py = r["y"] + r["uy"] * dt
-                if abs(px - xc) <= max(2.0, 0.5 * w_app + 1.5 + 0.02 * abs(r["uy"] * dt)) and \
-                        abs(py - yc) <= 3.0 + 0.04 * abs(r["uy"] * dt) and 0.6 < (w_app + 1) / (r["w"] + 1) < 1.6:
-                    dup = True
-                    break
-            if dup:
-                self.rejections["seen_before"] += 1
-                continue
-            kap = float(self.volume.kappa(a))
-            area = float(effective_area_rate_px2_s((dx, mot), w_app, prof.shape, exposure_s=T,
-                                                   frame_interval_s=self._frame_interval))
-            if kap <= 0 or area <= 0:
+            frame_weights = self._frame_weights(c, e_r)
+            kap = float(self.volume.kappa(a, weights=frame_weights, noise_dn=c.get("noise_dn")))
+            area = float(whole_streak_area_px2((dx, mot), w_app, prof.shape)) / self._frame_interval
+            if not kap >= self._kappa_floor(frame_weights) or area <= 0:
                 rejected += 1
                 self.rejections["no_volume"] += 1
                 continue
@@ -677,14 +785,89 @@ class RainGauge:
             z = float(self.volume.depth_m(a))
             v = mot * z / (f * T)
             weight = 1.0 / (kap * area)
-            d = {"t": t, "x": xc, "y": yc, "ux": dx / T, "uy": mot / T, "w": w_app, "diameter_m": 2 * a,
+            # the same drop seen in an earlier frame continues its track (one drop for the
+            # counting statistics); every sighting adds its own snapshot estimate
+            track = self._match_track(t, xc, yc, dx, mot, w_app)
+            if track != self._n_tracks - 1:
+                self.rejections["seen_before"] += 1
+            d = {"t": t, "track": track, "x": xc, "y": yc, "ux": dx / T, "uy": mot / T, "w": w_app,
+                 "diameter_m": 2 * a,
                  "velocity_m_s": v, "weight_s_m3": weight, "blur_px": c["blur_px"], "width_px": c["width_px"],
                  "apparent_width_px": w_app, "motion_px": mot, "chi2": c["chi2"],
-                 "accum_mm": 1e3 * math.pi / 6 * (2 * a) ** 3 * v * weight}
-            self._recent.append(d)
+                 "accum_base_mm": 1e3 * math.pi / 6 * (2 * a) ** 3 * v * weight}
+            d["accum_mm"] = d["accum_base_mm"] * fill
             self._slopes.append(c["slope"])
             counted.append(d)
         return counted, rejected
+
+    def _half_gap(self, steps: float) -> float:
+        """Half the unobserved frame periods before a frame ``steps`` periods after the last
+        analysed one (none for the first frame; at most :data:`MAX_FILLED_GAP_S`) [-]."""
+        if not math.isfinite(steps):
+            return 0.0
+        cap = max(int(round(MAX_FILLED_GAP_S / self._frame_interval)), 1)
+        return 0.5 * (min(steps, cap) - 1)
+
+    def _kappa_floor(self, weights) -> float:
+        """:data:`KAPPA_FLOOR_REL` times the largest kappa over the sizes, for a frame's
+        contrast weights (None: the volume's nominal contrast) [m^3/px^2]."""
+        key = None if weights is None else id(weights)
+        cached = getattr(self, "_kappa_floor_cache", None)
+        if cached is None or cached[0] != key or cached[1] is not weights:
+            grid = np.geomspace(0.05e-3, 5e-3, 120)
+            peak = float(np.nanmax(self.volume.kappa(grid, weights=weights)))
+            self._kappa_floor_cache = (key, weights, KAPPA_FLOOR_REL * peak if peak > 0 else math.inf)
+        return self._kappa_floor_cache[2]
+
+    def _prune_tracks(self, t: float) -> None:
+        """Forget the counted drops that can no longer be whole in a frame at time t [s]
+        (their predicted streak has left the frame, or a second has passed)."""
+        M = self.profile.shape[0]
+        T = self.profile.exposure_s
+        keep = deque()
+        for r in self._recent:
+            dt = t - r["t"]
+            if dt > 1.0 or r["y"] + r["mot"] * dt / T - 0.5 * r["mot"] > M:
+                continue
+            keep.append(r)
+        self._recent = keep
+
+    def _match_track(self, t: float, xc: float, yc: float, dx: float, mot: float, w_app: float) -> int:
+        """The track of a streak at (xc, yc) [px] of motion (dx, mot) per exposure [px] and
+        width w_app [px]: that of a drop seen in an earlier frame (the track moves here), or
+        a new one.
+
+        The displacement since the track's last sighting, over the real time between the
+        frames (however many were dropped), must match the image motion both streaks measure:
+        along the fall within the motion's measurement error (-10 % to +20 % of the length, and
+        3 px) scaled by the frames' separation dt / T, and the position error (3 px); across
+        it within half the width and the slant's error.  Each track takes at most one streak
+        per frame, the closest.
+        """
+        T = self.profile.exposure_s
+        best, best_r = None, 1.0
+        for r in self._recent:
+            dt = t - r["t"]
+            if dt <= 0:
+                continue
+            s = dt / T
+            m = 0.5 * (mot + r["mot"])
+            if not 0.6 < (w_app + 1) / (r["w"] + 1) < 1.6:
+                continue
+            ry = abs(yc - r["y"] - m * s) / (3.0 + (3.0 + 0.2 * m) * s)
+            rx = abs(xc - r["x"] - 0.5 * (dx + r["dx"]) * s) / max(2.0, 0.5 * w_app + 1.5 + 0.02 * m * s)
+            q = max(rx, ry)
+            if q <= best_r:
+                best, best_r = r, q
+        if best is None:
+            self._recent.append({"id": self._n_tracks, "t": t, "x": xc, "y": yc, "dx": dx, "mot": mot,
+                                 "w": w_app, "n": 1})
+            self._n_tracks += 1
+            return self._n_tracks - 1
+        n = best["n"]
+        best.update(t=t, x=xc, y=yc, dx=(n * best["dx"] + dx) / (n + 1), mot=(n * best["mot"] + mot) / (n + 1),
+                    n=n + 1)
+        return best["id"]
 
     def _overlap_probability(self, labels, sp) -> float:
         """Chance that this streak's own pixels, placed at random in this frame, would touch
@@ -729,6 +912,8 @@ class RainGauge:
             self._frames.popleft()
         while self._window_drops and self._window_drops[0]["t"] < horizon - 1e-9:
             self._window_drops.popleft()
+        while self._gaps and self._gaps[0][1] < horizon - 1e-9:
+            self._gaps.popleft()
         return out
 
     def _record(self, t0: float, t1: float, *, partial: bool = False) -> dict:
@@ -746,6 +931,16 @@ class RainGauge:
                 [d["diameter_m"] for d in drops], [d["velocity_m_s"] for d in drops],
                 [d["weight_s_m3"] for d in drops], duration,
                 empty_scale_mm_h=self._empty_scale * self.window_s / duration)
+        if drops and duration > 0:
+            # a drop seen in several frames adds a snapshot estimate from each: the counting
+            # statistics are those of the distinct drops (tracks), each with its summed share
+            tracks = np.unique([d["track"] for d in drops], return_inverse=True)[1]
+            share = np.array([d["diameter_m"] ** 3 * d["velocity_m_s"] * d["weight_s_m3"] for d in drops])
+            ok = np.isfinite(share) & (share > 0)
+            per_drop = np.bincount(tracks[ok], 3.6e6 * math.pi / 6 * share[ok] / duration)
+            prod["rain_rate_ci95_mm_h"] = list(_products.rate_interval(
+                per_drop[per_drop > 0], empty_scale=self._empty_scale * self.window_s / duration))
+            prod["drops_counted"] = int(np.count_nonzero(per_drop > 0))
         rate = prod["rain_rate_mm_h"]
         counted = prod["drops_counted"]
         if 0 < counted < self.min_drops or (counted == 0 and duration <= 0):
@@ -756,6 +951,10 @@ class RainGauge:
             hits = sum(1 for fr in frames if flag in fr[1])
             if hits > share * n_frames:
                 quality.append(flag)
+        if "dropped_frames" not in quality and any(a < t1 - 1e-9 and b > t0 + 1e-9 for a, b in self._gaps):
+            # frames missing in the window, analysed or not (the rate counts only the time
+            # observed; a long outage is not analysed at all)
+            quality.append("dropped_frames")
         # drops too faint to be detected against this background (Eq. 18: a focused streak
         # changes a pixel by beta (E_r - I_b)) are missing from the rate: the upper limit
         # covers the share of the rate they may carry
@@ -764,6 +963,12 @@ class RainGauge:
         if miss > 0.0 and lo_hi[1] is not None and np.isfinite(lo_hi[1]):
             floor = self._empty_scale * self.window_s / max(duration, self._frame_interval)
             lo_hi[1] = max(lo_hi[1], floor) / max(1.0 - miss, 1e-3)
+            if miss >= 1.0:
+                # no drop size is visible against this background (for the drop brightness
+                # assumed or measured): the rate has no upper limit
+                lo_hi[1] = float("nan")
+                if counted == 0:
+                    quality.append("no_visible_drops")
             prod["rain_rate_ci95_mm_h"] = lo_hi
             if miss > 0.1 and "low_contrast" not in quality:
                 quality.append("low_contrast")
@@ -796,6 +1001,18 @@ class RainGauge:
             "min_detectable_diameter_mm": num(1e3 * d_det),
         }
 
+    def _frame_weights(self, c: dict, e_r: float):
+        """Contrast weights of the frame of candidate ``c`` (:meth:`SampleVolume.histogram_weights`),
+        cached per frame; None (the volume's nominal contrast) without a drop brightness."""
+        hist = c.get("bg_hist")
+        if hist is None or not np.isfinite(e_r):
+            return None
+        key = (id(hist), e_r)
+        if getattr(self, "_weights_key", None) != key:
+            self._weights_key = key
+            self._weights = self.volume.histogram_weights(hist, min(e_r, self._white_dn))
+        return self._weights
+
     def _missed_share(self, frames, rate_mm_h: float) -> tuple[float, float]:
         """Smallest detectable drop diameter [m] over a window's frames, and the share of the
         rain rate that drops below it may carry [-].
@@ -821,6 +1038,13 @@ class RainGauge:
         # faint streaks are accepted when noise brightens them, which inflates E_r: it cannot
         # exceed the sensor's white
         e_r = min(e_r, self._white_dn)
+        hists = [fr[4] for fr in frames if len(fr) > 4 and fr[4] is not None]
+        if self.defocus_model == "uniform" and hists:
+            # the sizes the window's backgrounds leave visible anywhere are counted up by the
+            # share of the frame they are visible in; only the sizes invisible everywhere are
+            # missing (raingauge.gauge.volume.SampleVolume.hidden_share)
+            weights = self.volume.histogram_weights(np.sum(hists, axis=0), e_r)
+            return self.volume.hidden_share(weights, rate_mm_h, velocity_model=self.velocity_model)
         contrast = e_r - float(np.median(bgs))
         d = np.geomspace(0.1e-3, 8e-3, 200)
         a = 0.5 * d

@@ -742,59 +742,94 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
     big = np.nonzero(stats[:, 4] > 0)[0]
     # merge collinear pieces separated by a short vertical gap
     if big.size > 1 and merge_gap_px > 0:
-        x, y, w, h = (stats[big, k].astype(float) for k in range(4))
-        cx = x + w / 2
-        order = np.argsort(cx, kind="stable")
-        idx = big[order]
-        cxs = cx[order]
-        xs_, ys_, ws_, hs_ = x[order], y[order], w[order], h[order]
-        narrow = ws_ <= np.maximum(0.5 * hs_, 8.0)            # near-vertical pieces only
-        pairs = []
-        n_big = idx.size
-        for k in range(1, n_big):
-            a_i = np.arange(n_big - k)
-            b_i = a_i + k
-            near = cxs[b_i] - cxs[a_i] <= np.maximum(ws_[a_i], 3) + 2
-            if not near.any():
-                break
-            gap = np.maximum(ys_[b_i] - (ys_[a_i] + hs_[a_i]), ys_[a_i] - (ys_[b_i] + hs_[b_i]))
-            ok = near & narrow[a_i] & narrow[b_i] & (gap >= 0) & (gap <= merge_gap_px) & \
-                (np.abs(cxs[b_i] - cxs[a_i]) <= 0.5 * np.minimum(ws_[a_i], ws_[b_i]) + 1.5) & \
-                ((ws_[a_i] + 1) / (ws_[b_i] + 1) >= 0.5) & ((ws_[a_i] + 1) / (ws_[b_i] + 1) <= 2.0)
-            pairs.extend(zip(idx[a_i[ok]].tolist(), idx[b_i[ok]].tolist()))
-        if pairs:
-            parent: dict[int, int] = {}
-
-            def find(i):
-                parent.setdefault(i, i)
-                while parent[i] != i:
-                    parent[i] = parent[parent[i]]
-                    i = parent[i]
-                return i
-
-            for ia, ib in pairs:
-                parent[find(ib)] = find(ia)
-            groups: dict[int, list[int]] = {}
-            for i in list(parent):
-                groups.setdefault(find(i), []).append(i)
-            remap = np.arange(stats.shape[0], dtype=labels.dtype)
-            for root, members in groups.items():
-                if len(members) < 2:
-                    continue
-                m = np.array(members)
-                remap[m] = root
-                x0, y0 = stats[m, 0].min(), stats[m, 1].min()
-                x1 = (stats[m, 0] + stats[m, 2]).max()
-                y1 = (stats[m, 1] + stats[m, 3]).max()
-                stats[root] = [x0, y0, x1 - x0, y1 - y0, stats[m, 4].sum()]
-                stats[m[m != root], 4] = 0
-            for root, members in groups.items():
-                if len(members) < 2:
-                    continue
-                x0, y0, ww, hh = stats[root, :4]
-                sub = labels[y0:y0 + hh, x0:x0 + ww]
-                sub[...] = remap[sub]
+        _merge_pieces(labels, stats, big, merge_gap_px)
     return labels, stats
+
+
+def _merge_pieces(labels: np.ndarray, stats: np.ndarray, big: np.ndarray, merge_gap_px: float) -> None:
+    """Merge collinear near-vertical pieces of one streak in place (labels and stats).
+
+    Two pieces are joined when their centres lie within their widths of each other
+    across, the vertical gap between their boxes is at most ``merge_gap_px`` and their
+    widths agree within a factor 2.  A merged group keeps the label of one of its pieces
+    (the root of a union over the pairs taken in a fixed order: by rank distance in x,
+    then by piece), whose stats become the group's box and total area; the other pieces
+    get area 0 and their pixels that label.  No loop over groups: the boxes come from
+    grouped minima and maxima, the pixels are relabelled in one gather.
+    """
+    x, y, w, h = (stats[big, k].astype(float) for k in range(4))
+    cx = x + w / 2
+    order = np.argsort(cx, kind="stable")
+    idx = big[order]
+    cxs = cx[order]
+    ys_, ws_, hs_ = y[order], w[order], h[order]
+    narrow = ws_ <= np.maximum(0.5 * hs_, 8.0)            # near-vertical pieces only
+    n_big = idx.size
+    # candidate pairs (a, b > a) in cx order with cxs[b] - cxs[a] <= max(w_a, 3) + 2
+    # (exact: half-integer centres, integer widths), listed by rank distance k = b - a, then a
+    hi = np.searchsorted(cxs, cxs + np.maximum(ws_, 3) + 2, side="right")
+    cnt = np.maximum(hi - np.arange(n_big) - 1, 0)
+    if not cnt.any():
+        return
+    a_i = np.repeat(np.arange(n_big), cnt)
+    k_i = np.arange(a_i.size) - np.repeat(np.cumsum(cnt) - cnt, cnt) + 1
+    b_i = a_i + k_i
+    gap = np.maximum(ys_[b_i] - (ys_[a_i] + hs_[a_i]), ys_[a_i] - (ys_[b_i] + hs_[b_i]))
+    ratio = (ws_[a_i] + 1) / (ws_[b_i] + 1)
+    ok = narrow[a_i] & narrow[b_i] & (gap >= 0) & (gap <= merge_gap_px) & \
+        (np.abs(cxs[b_i] - cxs[a_i]) <= 0.5 * np.minimum(ws_[a_i], ws_[b_i]) + 1.5) & \
+        (ratio >= 0.5) & (ratio <= 2.0)
+    if not ok.any():
+        return
+    sel = np.nonzero(ok)[0]
+    sel = sel[np.lexsort((a_i[sel], k_i[sel]))]
+    parent: dict[int, int] = {}
+
+    def find(i):
+        parent.setdefault(i, i)
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for ia, ib in zip(idx[a_i[sel]].tolist(), idx[b_i[sel]].tolist()):
+        parent[find(ib)] = find(ia)
+    members = np.fromiter(parent.keys(), dtype=np.int64, count=len(parent))
+    roots = np.fromiter((find(i) for i in members.tolist()), dtype=np.int64, count=members.size)
+    # every member of ``parent`` belongs to a group of at least two pieces
+    remap = np.arange(stats.shape[0], dtype=labels.dtype)
+    remap[members] = roots
+    x0 = stats[members, 0]
+    y0 = stats[members, 1]
+    x1 = x0 + stats[members, 2]
+    y1 = y0 + stats[members, 3]
+    rs = np.unique(roots)
+    gx0 = np.full(stats.shape[0], np.iinfo(np.int64).max)
+    gy0 = gx0.copy()
+    gx1 = np.full(stats.shape[0], np.iinfo(np.int64).min)
+    gy1 = gx1.copy()
+    np.minimum.at(gx0, roots, x0)
+    np.minimum.at(gy0, roots, y0)
+    np.maximum.at(gx1, roots, x1)
+    np.maximum.at(gy1, roots, y1)
+    area = np.bincount(roots, stats[members, 4], stats.shape[0]).astype(stats.dtype)
+    stats[members, 4] = 0
+    stats[rs, 0] = gx0[rs]
+    stats[rs, 1] = gy0[rs]
+    stats[rs, 2] = gx1[rs] - gx0[rs]
+    stats[rs, 3] = gy1[rs] - gy0[rs]
+    stats[rs, 4] = area[rs]
+    # relabel the pixels of the merged boxes (all at once: the remap is idempotent)
+    bx, by, bw, bh = gx0[rs], gy0[rs], gx1[rs] - gx0[rs], gy1[rs] - gy0[rs]
+    n_cols = labels.shape[1]
+    rows_per = bh
+    row_start = np.repeat(by, rows_per) + (np.arange(int(rows_per.sum())) - np.repeat(np.cumsum(rows_per) - rows_per, rows_per))
+    row_x0 = np.repeat(bx, rows_per)
+    row_w = np.repeat(bw, rows_per)
+    flat = np.repeat(row_start * n_cols + row_x0, row_w) + \
+        (np.arange(int(row_w.sum())) - np.repeat(np.cumsum(row_w) - row_w, row_w))
+    lab = labels.reshape(-1)
+    lab[flat] = remap[lab[flat]]
 
 
 # ---------------------------------------------------------------- per streak
@@ -1266,13 +1301,13 @@ def _refine_box_width(ks, o, v, cen, w0, K):
     # sorted by streak and |u|, its sums come from cumulative sums at two boundaries
     span = float(uu.max()) + 2.0 if uu.size else 1.0
     key = ku * span + uu
-    order = np.argsort(key, kind="stable")
+    order = np.argsort(key)
     key, uo, vo = key[order], uu[order], vv[order]
 
     def cums(x):
         return np.concatenate(([0.0], np.cumsum(x)))
 
-    c_n, c_u, c_uu = cums(np.ones_like(uo)), cums(uo), cums(uo * uo)
+    c_n, c_u, c_uu = np.arange(uo.size + 1, dtype=np.float64), cums(uo), cums(uo * uo)
     c_v, c_vu = cums(vo), cums(vo * uo)
     hw = 0.5 * base[:, None] * _BOX_FACTORS[None, :]                     # (K, nf)
     a_ = np.abs(hw - 0.5)
@@ -1303,6 +1338,129 @@ def _refine_box_width(ks, o, v, cen, w0, K):
     w_fit = base * _BOX_FACTORS[jj] * np.exp(shift * step)
     inside = (j >= 1) & (j <= nf - 2) & np.isfinite(gain[ar, j])
     return np.where(good & inside, w_fit, w0)
+
+
+def _crop_pixels(x0, x1, y0, y1):
+    """Every pixel of K rectangular crops [y0, y1) x [x0, x1), row by row (no loop).
+
+    Returns ``rstart`` (first row of each crop in the list of rows), ``R`` (number of
+    rows), ``row_k`` (crop of each row), and per pixel ``rkey`` (its row), ``kk`` (its
+    crop), ``ly, lx`` (position in the crop) and ``gy, gx`` (position in the image).
+    """
+    cw, ch = x1 - x0, y1 - y0
+    K = ch.size
+    rstart = np.concatenate(([0], np.cumsum(ch)[:-1]))
+    R = int(ch.sum())
+    row_k = np.repeat(np.arange(K), ch)
+    row_l = np.arange(R) - rstart[row_k]
+    per_row = cw[row_k]
+    rkey = np.repeat(np.arange(R), per_row)
+    kk = row_k[rkey]
+    ly = row_l[rkey]
+    lx = np.arange(rkey.size) - np.concatenate(([0], np.cumsum(per_row)[:-1]))[rkey]
+    gy = y0[kk] + ly
+    gx = x0[kk] + lx
+    return rstart, R, row_k, rkey, kk, ly, lx, gy, gx
+
+
+def _pixel_values(change, flat, cur, contrast):
+    """Change I_n - (I_{n-1} + I_{n+1}) / 2 at the flat pixel indices (divided by the local
+    contrast E_r - I_b and scaled to C_ref when ``contrast`` = (E_r, C_ref) is given, Eq. 18),
+    the raw change and I_n there (float64)."""
+    cg = None if cur is None else np.take(cur, flat).astype(np.float64)
+    if isinstance(change, tuple):
+        p_, c_, n_ = change
+        cc = cg if (c_ is cur and cg is not None) else np.take(c_, flat).astype(np.float64)
+        raw = cc - 0.5 * (np.take(p_, flat).astype(np.float64) + np.take(n_, flat))
+    else:
+        raw = np.take(change, flat).astype(np.float64)
+    val = raw
+    if contrast is not None and cg is not None:
+        e_r, c_ref = contrast
+        val = raw * (c_ref / np.maximum(e_r - (cg - raw), 0.25 * c_ref))
+    return val, raw, cg
+
+
+def _group_sum(k, values, K: int) -> np.ndarray:
+    """Per-group sums of ``values`` for group indices ``k`` given in ascending order:
+    ``np.bincount(k, values, K)`` by one segment reduction (pairwise summation, several
+    times faster than the scattered accumulation)."""
+    values = np.asarray(values)
+    out = np.zeros(K)
+    n = values.size
+    if n == 0 or K == 0:
+        return out
+    starts = np.searchsorted(k, np.arange(K))
+    filled = starts < np.append(starts[1:], n)
+    sums = np.add.reduceat(values.astype(np.float64, copy=False), np.minimum(starts, n - 1))
+    out[filled] = sums[filled]
+    return out
+
+
+def _axis_moments(img, k, lx, ly, K, x0, y0, x_default, y_default):
+    """Axis of K streaks from the first and second moments of the positive change ``img``
+    on their pixels (crop ``k``, position ``lx, ly`` in a crop whose corner is x0, y0):
+    centre (xm, ym) [px] and slope dx/dy [px/px]; streaks without positive change get the
+    defaults and slope 0."""
+    fx, fy = lx.astype(np.float64), ly.astype(np.float64)
+    wts = np.maximum(img, 0.0)
+    s0 = _group_sum(k, wts, K)
+    sx = _group_sum(k, wts * fx, K)
+    sy = _group_sum(k, wts * fy, K)
+    safe = np.where(s0 > 0, s0, 1.0)
+    xm_l, ym_l = sx / safe, sy / safe
+    dy = fy - ym_l[k]
+    myy = _group_sum(k, wts * dy * dy, K) / safe
+    mxy = _group_sum(k, wts * (fx - xm_l[k]) * dy, K) / safe
+    slope = np.where(myy > 1e-9, mxy / np.where(myy > 1e-9, myy, 1.0), 0.0)
+    xm = np.where(s0 > 0, xm_l + x0, x_default)
+    ym = np.where(s0 > 0, ym_l + y0, y_default)
+    slope = np.where(s0 > 0, slope, 0.0)
+    return xm, ym, slope
+
+
+def _cross_width(ks, o, img_s, row_width, K, sigma_min):
+    """Apparent width w' of K streaks from their change ``img_s`` at offsets ``o`` across
+    the axis [px] (streak ``ks``); ``row_width`` the detected width across [px].
+
+    Three passes of the second moment: the whole band, then windows of w'/2 + 1.5 px
+    about the centre (the far pixels only add noise to the second moment; the edges of a
+    sharp or uniformly defocused streak end within 1 px of w'/2), w' = sqrt(12 (var -
+    1/12 - s_min^2)); then refined by least squares (:func:`_refine_box_width`: the moment
+    is noisy on faint streaks, it weighs the far pixels' noise by their squared offset).
+    Returns (centre [px], w' [px], total change c0)."""
+    win = np.full(K, np.inf)
+    cen_o = np.zeros(K)
+    for i in range(3):
+        # the first pass takes the whole band (an infinite window)
+        v = img_s if i == 0 else np.where(np.abs(o - cen_o[ks]) <= win[ks], img_s, 0.0)
+        vo = v * o
+        c0 = _group_sum(ks, v, K)
+        c1 = _group_sum(ks, vo, K)
+        c2 = _group_sum(ks, vo * o, K)
+        with np.errstate(all="ignore"):
+            cen = c1 / c0
+            var = c2 / c0 - cen ** 2
+            w_app = np.sqrt(12.0 * np.maximum(var - 1.0 / 12.0 - sigma_min ** 2, 0.0))
+        good = np.isfinite(w_app) & (c0 > 0)
+        w_lim = np.clip(np.where(good, w_app, row_width), 0.5 * row_width - 1.0, row_width + 2.0)
+        win = np.where(good, 0.5 * w_lim + 1.5, win)
+        cen_o = np.where(good, cen, cen_o)
+    w_app = _refine_box_width(ks, o, img_s, cen, w_app, K)
+    return cen, w_app, c0
+
+
+def _masked_row_median(a: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Median of each row of ``a`` over the entries where ``mask`` is true (NaN for none);
+    the mean of the two middle values for an even count, as ``np.nanmedian``."""
+    srt = np.sort(np.where(mask, a, np.inf), axis=1)
+    n = mask.sum(axis=1)
+    ar = np.arange(a.shape[0])
+    lo = srt[ar, np.maximum((n - 1) // 2, 0)]
+    hi = srt[ar, np.maximum(n // 2, 0)]
+    with np.errstate(invalid="ignore"):
+        med = np.where(n % 2 == 1, lo, (lo + hi) / 2.0)
+    return np.where(n > 0, med, np.nan)
 
 
 def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarray, select, *,
@@ -1370,69 +1528,43 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     x1 = np.minimum(x + w + mh, N)
     y0 = np.maximum(y - m, 0)
     y1 = np.minimum(y + h + m, M)
-    cw, ch = x1 - x0, y1 - y0
-    # every pixel of every crop, row by row (no division, no loop)
+    ch = y1 - y0
+    # -- the streak's own pixels lie in its box: axis from the moments of their positive change
+    box = _crop_pixels(x, x + w, y, y + h)
+    kq, gyq, gxq = box[4], box[7], box[8]
+    flat_q = gyq * N + gxq
+    io = np.flatnonzero(np.take(labels, flat_q) == L[kq])
+    flat_o = flat_q[io]
+    img_o, raw_o, cur_o = _pixel_values(change, flat_o, cur, contrast)
+    ko = kq[io]
+    oy, ox = gyq[io], gxq[io]
+    xm, ym, slope = _axis_moments(img_o, ko, ox - x0[ko], oy - y0[ko], K, x0, y0, x + w / 2.0, y + h / 2.0)
+    # -- width of the detected pixels along a row
     rstart = np.concatenate(([0], np.cumsum(ch)[:-1]))
     R = int(ch.sum())
     row_k = np.repeat(np.arange(K), ch)
-    row_l = np.arange(R) - rstart[row_k]
-    per_row = cw[row_k]
-    rkey = np.repeat(np.arange(R), per_row)
-    kk = row_k[rkey]
-    ly = row_l[rkey]
-    lx = np.arange(rkey.size) - np.concatenate(([0], np.cumsum(per_row)[:-1]))[rkey]
-    gy = y0[kk] + ly
-    gx = x0[kk] + lx
-    flat = gy * N + gx
-    lab = np.take(labels, flat)
-    own = lab == L[kk]
-    other = (lab != 0) & ~own & valid[lab]
-
-    def values(ix):
-        """Change (divided by the local contrast when asked), raw change and I_n at pixels ix."""
-        f_ = flat[ix]
-        cg = None if cur is None else np.take(cur, f_).astype(np.float64)
-        if isinstance(change, tuple):
-            p_, c_, n_ = change
-            cc = cg if (c_ is cur and cg is not None) else np.take(c_, f_).astype(np.float64)
-            raw = cc - 0.5 * (np.take(p_, f_).astype(np.float64) + np.take(n_, f_))
-        else:
-            raw = np.take(change, f_).astype(np.float64)
-        val = raw
-        if contrast is not None and cg is not None:
-            e_r, c_ref = contrast
-            val = raw * (c_ref / np.maximum(e_r - (cg - raw), 0.25 * c_ref))
-        return val, raw, cg
-
-    # -- axis from the moments of the positive change on the streak's own pixels
-    io = np.flatnonzero(own)
-    img_o, raw_o, cur_o = values(io)
-    ko = kk[io]
-    fx, fy = lx[io].astype(np.float64), ly[io].astype(np.float64)
-    wts = np.maximum(img_o, 0.0)
-    s0 = np.bincount(ko, wts, K)
-    sx = np.bincount(ko, wts * fx, K)
-    sy = np.bincount(ko, wts * fy, K)
-    safe = np.where(s0 > 0, s0, 1.0)
-    xm_l, ym_l = sx / safe, sy / safe
-    dy = fy - ym_l[ko]
-    myy = np.bincount(ko, wts * dy * dy, K) / safe
-    mxy = np.bincount(ko, wts * (fx - xm_l[ko]) * dy, K) / safe
-    slope = np.where(myy > 1e-9, mxy / np.where(myy > 1e-9, myy, 1.0), 0.0)
-    xm = np.where(s0 > 0, xm_l + x0, x + w / 2.0)
-    ym = np.where(s0 > 0, ym_l + y0, y + h / 2.0)
-    slope = np.where(s0 > 0, slope, 0.0)
-    # -- width of the detected pixels along a row
-    own_rows = np.bincount(rkey[io], minlength=R) > 0
-    n_rows = np.bincount(row_k, own_rows, K)
+    own_rows = np.bincount(rstart[ko] + (oy - y0[ko]), minlength=R) > 0
+    n_rows = _group_sum(row_k, own_rows, K)
     row_width = np.bincount(ko, minlength=K) / np.maximum(n_rows, 1)
-    # -- the band around the axis, row sums
-    off = gx - (xm[kk] + slope[kk] * (gy - ym[kk]))
+    # -- the band around the axis (|offset| <= half, inside the crop [x0, x1) and not on
+    # another streak), built row by row from the axis, row sums
     half = 0.5 * row_width + 1.5 + m / 2
-    ib = np.flatnonzero((np.abs(off) <= half[kk]) & ~other)
-    img_b = values(ib)[0]
-    kb, rb, ob, gyb = kk[ib], rkey[ib], off[ib], gy[ib].astype(np.float64)
-    row_sum = np.bincount(rb, img_b, R)
+    row_y = y0[row_k] + (np.arange(R) - rstart[row_k])
+    axis_x = xm[row_k] + slope[row_k] * (row_y - ym[row_k])
+    bx0 = np.clip(np.floor(axis_x - half[row_k]).astype(np.int64), x0[row_k], x1[row_k])
+    bx1 = np.clip(np.ceil(axis_x + half[row_k]).astype(np.int64) + 1, bx0, x1[row_k])
+    n_b = bx1 - bx0
+    rb = np.repeat(np.arange(R), n_b)
+    gxb = np.repeat(bx0, n_b) + (np.arange(rb.size) - np.repeat(np.cumsum(n_b) - n_b, n_b))
+    kb = row_k[rb]
+    gyb_i = row_y[rb]
+    ob = gxb - (xm[kb] + slope[kb] * (gyb_i - ym[kb]))
+    flat_b = gyb_i * N + gxb
+    lab_b = np.take(labels, flat_b)
+    ib = np.flatnonzero((np.abs(ob) <= half[kb]) & ~((lab_b != 0) & (lab_b != L[kb]) & valid[lab_b]))
+    kb, rb, ob, gyb = kb[ib], rb[ib], ob[ib], gyb_i[ib].astype(np.float64)
+    img_b = _pixel_values(change, flat_b[ib], cur, contrast)[0]
+    row_sum = _group_sum(rb, img_b, R)
     H = int(ch.max())
     col = np.arange(R) - rstart[row_k]
     S = np.zeros((K, H + 2))
@@ -1443,8 +1575,7 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     inner = inside & (rows_g >= (y + 0.25 * h)[:, None]) & (rows_g <= (y + 0.75 * h)[:, None])
     few = inner.sum(axis=1) < 2
     inner[few] = inside[few]
-    with np.errstate(all="ignore"):
-        plateau = np.nanmedian(np.where(inner, sm, np.nan), axis=1)
+    plateau = _masked_row_median(sm, inner)
     lvl = 0.5 * plateau
     above = (sm >= lvl[:, None]) & inside
     has = above.any(axis=1) & (plateau > 0)
@@ -1471,41 +1602,18 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     ks, img_s = kb[js], img_b[js]
     o = ob[js] * cos_t[ks]
     n_cross = np.bincount(ks, minlength=K)
-    # three passes: the whole band, then windows of w'/2 + 1.5 px about the centre (the far
-    # pixels only add noise to the second moment; the edges of a sharp or uniformly
-    # defocused streak end within 1 px of w'/2)
-    win = np.full(K, np.inf)
-    cen_o = np.zeros(K)
-    for _ in range(3):
-        v = np.where(np.abs(o - cen_o[ks]) <= win[ks], img_s, 0.0)
-        c0 = np.bincount(ks, v, K)
-        c1 = np.bincount(ks, v * o, K)
-        c2 = np.bincount(ks, v * o * o, K)
-        with np.errstate(all="ignore"):
-            cen = c1 / c0
-            var = c2 / c0 - cen ** 2
-            w_app = np.sqrt(12.0 * np.maximum(var - 1.0 / 12.0 - sigma_min ** 2, 0.0))
-        good = np.isfinite(w_app) & (c0 > 0)
-        w_lim = np.clip(np.where(good, w_app, row_width * cos_t), 0.5 * row_width * cos_t - 1.0,
-                        row_width * cos_t + 2.0)
-        win = np.where(good, 0.5 * w_lim + 1.5, win)
-        cen_o = np.where(good, cen, cen_o)
-    # refine w' by least squares: a box of width w about that centre, its height in closed
-    # form, the squared residual compared on a grid of widths around the moment estimate and
-    # interpolated by a parabola (the moment is noisy on faint streaks: it weighs the far
-    # pixels' noise by their squared offset)
-    w_app = _refine_box_width(ks, o, img_s, cen, w_app, K)
+    cen, w_app, c0 = _cross_width(ks, o, img_s, row_width * cos_t, K, sigma_min)
     ok = has & (c0 > 0) & (n_cross >= 6) & np.isfinite(w_app) & (w_app > 0)
     # goodness of the uniform model: the change on the plateau rows against a box of width
     # w' (pixel-integrated) holding the same total, per pixel in units of the noise
-    n_r = np.bincount(row_k, np.bincount(rb[js], minlength=R) > 0, K)
+    n_r = _group_sum(row_k, np.bincount(rb[js], minlength=R) > 0, K)
     with np.errstate(all="ignore"):
         amp = c0 / (np.maximum(n_r, 1) * w_app)
         hw = 0.5 * w_app[ks]
         u = o - cen[ks]
         cover = np.clip(np.minimum(u + 0.5, hw) - np.maximum(u - 0.5, -hw), 0.0, None)
         res = img_s - amp[ks] * cover
-        chi2 = np.bincount(ks, res * res, K) / (np.maximum(n_cross, 1) * max(noise_sigma, 1e-3) ** 2)
+        chi2 = _group_sum(ks, res * res, K) / (np.maximum(n_cross, 1) * max(noise_sigma, 1e-3) ** 2)
     chi2 = np.where(ok & np.isfinite(chi2), chi2, np.inf)
     cap = cap_offset_px(np.where(np.isfinite(w_app), w_app, 1.0))
     top = top_r + cap
@@ -1514,19 +1622,19 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     # -- background and the photometric slope of Eq. (18) on the own pixels
     bg_dn = np.full(K, np.nan)
     beta = np.full(K, np.nan)
-    ok_k, oy, ox = ko, gy[io], gx[io]
+    ok_k = ko
     if cur is not None:
         c_own = cur_o
         n_own = np.bincount(ok_k, minlength=K)
         with np.errstate(all="ignore"):
-            bg_dn = np.bincount(ok_k, c_own - raw_o, K) / n_own
+            bg_dn = _group_sum(ok_k, c_own - raw_o, K) / n_own
         if prev is not None:
-            b = np.take(prev, flat[io]).astype(np.float64)
+            b = np.take(prev, flat_o).astype(np.float64)
             d = c_own - b
-            sb = np.bincount(ok_k, b, K)
-            sbb = np.bincount(ok_k, b * b, K)
-            sd = np.bincount(ok_k, d, K)
-            sbd = np.bincount(ok_k, b * d, K)
+            sb = _group_sum(ok_k, b, K)
+            sbb = _group_sum(ok_k, b * b, K)
+            sd = _group_sum(ok_k, d, K)
+            sbd = _group_sum(ok_k, b * d, K)
             with np.errstate(all="ignore"):
                 n = np.maximum(n_own, 1)
                 vb = sbb / n - (sb / n) ** 2

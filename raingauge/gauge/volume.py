@@ -5,15 +5,29 @@ A drop of radius a at depth z, measured at the focus distance z0 (Sec. 8
 w = 2 f a / z (Eq. 26 as corrected) and b the thin-lens blur circle
 (``raingauge.physics.camera.blur_circle_px``; a pillbox of diameter b has
 the variance b^2/16 across the streak, the same as a disc's chord of diameter
-b), and an apparent speed v' = V(a) z0 / z.  The defocus test of
-:mod:`raingauge.gauge.rejection` accepts it with probability
+b), and an apparent speed v' = V(a) z0 / z.  Its streak changes each pixel by
+A = beta (E_r - E_b) (Eqs. 17, 23-24), which sets whether Eq. (19) detects
+it, whether it can be measured at all, and the errors of its width and
+length (:func:`raingauge.gauge.rejection.streak_errors_px`, the same errors
+the gauge gives each measured streak).  The defocus test of
+:mod:`raingauge.gauge.rejection` then accepts it with probability
 
-    P(a, z) = Phi((tol - r) / s) - Phi((-tol - r) / s),  r = ln(v' / V(a')),
+    P(a, z) = P_det P_size [Phi((tol - r) / s) - Phi((-tol - r) / s)] P_focus,
+    r = ln(v' / V(a')),
 
-s being the measurement's standard error of r.  Each depth slab dz holds, per
-pixel of the image, (z / f)^2 dz of space, so the gauge samples
+tol the tolerance of the streak's own errors and s the standard error of r.
+Each depth slab dz holds, per pixel of the image, (z / f)^2 dz of space, so
+the gauge samples
 
-    kappa(a) = int P(a, z) (z / f)^2 dz        [m^3 per px^2 of image]
+    kappa(a; C, sigma) = int P(a, z) (z / f)^2 dz        [m^3 per px^2 of image]
+
+for a drop contrast C = E_r - E_b and a noise sigma (the sensor's plus the
+flicker of the undetected rain, Eq. 27).  A frame whose backgrounds vary
+samples each size in the mean of kappa over its pixels' contrasts
+(:meth:`SampleVolume.kappa` with :meth:`SampleVolume.histogram_weights`):
+sizes visible over part of the frame are counted up by that part, and the
+sizes visible nowhere are reported as missing
+(:meth:`SampleVolume.hidden_share`).
 
 and the volume imaged by the whole frame is kappa(a) times the frame's area
 in pixels, less the border in which a streak is cut by the edge (edge
@@ -29,6 +43,7 @@ int min(d, chord) = |R| - |R intersect (R + d)| for a convex region R.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -39,13 +54,18 @@ from raingauge.gauge.rejection import (
     DEFAULT_BLUR_SIGMA_PX,
     DEFAULT_K_SIGMA,
     DEFAULT_Q_MIN,
-    DEFAULT_MOTION_SIGMA_PX,
     DEFAULT_TOLERANCE_FLOOR,
-    DEFAULT_WIDTH_SIGMA_PX,
+    detection_margin,
+    detection_probability,
     law_tolerance,
     max_blur_px,
     q_sigma,
     ratio_sigma,
+    row_snr,
+    signal_rel_sigma,
+    sizing_probability,
+    streak_change_dn,
+    streak_errors_px,
     velocity_log_ratio,
 )
 
@@ -56,6 +76,9 @@ __all__ = [
     "whole_streak_area_px2",
     "EDGE_MARGIN_PX",
     "DEFOCUS_MODELS",
+    "DEFAULT_CONTRAST_DN",
+    "BACKGROUND_BIN_DN",
+    "background_histogram",
 ]
 
 #: How defocus widens a streak (see :func:`pass_probability`).
@@ -64,19 +87,63 @@ DEFOCUS_MODELS = ("uniform", "pillbox")
 #: Streaks closer than this to the frame edge count as clipped [px].
 EDGE_MARGIN_PX = 2.0
 
+#: Drop contrast E_r - E_b assumed when none is given [gray levels]: an overcast sky seen
+#: through the drop (E_r ~ 200, Sec. 4.2.3) over a dark background (~40).
+DEFAULT_CONTRAST_DN = 160.0
+
+
+#: Width of the bins of the background histogram [gray levels].
+BACKGROUND_BIN_DN = 4.0
+
+
+def background_histogram(frame, *, step: int = 8, n_bins: int = 64) -> np.ndarray:
+    """Histogram of a frame's background levels E_b, every ``step``-th pixel [counts].
+
+    Parameters
+    ----------
+    frame : (M, N) array
+        Linearised frame [gray levels] (a neighbour of the analysed one: no streaks of its own there).
+    step : int
+        Sub-sampling [px].
+    n_bins : int
+        Bins of :data:`BACKGROUND_BIN_DN` from 0 (levels above the last bin go into it).
+
+    Returns
+    -------
+    (n_bins,) int ndarray
+    """
+    sub = np.asarray(frame)[::step, ::step].ravel()
+    k = np.clip((sub / BACKGROUND_BIN_DN).astype(np.int64), 0, n_bins - 1)
+    return np.bincount(k, minlength=n_bins)
+
 
 def _pitch(profile) -> float:
     return profile.pixel_pitch_m if profile.pixel_pitch_m else 5e-6
 
 
+def _default_threshold(profile, noise_sigma_dn: float) -> float:
+    """c of Eq. (19) as the gauge uses it: the profile's, raised to 1.2 sigma of the noise."""
+    return float(max(profile.detection_threshold_dn, 1.2 * noise_sigma_dn))
+
+
 def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "paper",
                      rain_velocity_model: str | None = None, floor: float = DEFAULT_TOLERANCE_FLOOR,
-                     k_sigma: float = DEFAULT_K_SIGMA, width_sigma_px: float = DEFAULT_WIDTH_SIGMA_PX,
-                     motion_sigma_px: float = DEFAULT_MOTION_SIGMA_PX, blur_variance_factor: float = 1.0,
+                     k_sigma: float = DEFAULT_K_SIGMA, width_sigma_px=None, motion_sigma_px=None,
+                     blur_variance_factor: float = 1.0,
                      blur_floor_px: float = DEFAULT_BLUR_FLOOR_PX, blur_relative: float = DEFAULT_BLUR_RELATIVE,
                      blur_sigma_px: float = DEFAULT_BLUR_SIGMA_PX, defocus_model: str = "uniform",
-                     q_min: float = DEFAULT_Q_MIN) -> dict:
-    """Probability that a drop of radius a at depth z passes the defocus test.
+                     q_min: float = DEFAULT_Q_MIN, contrast_dn=DEFAULT_CONTRAST_DN,
+                     noise_sigma_dn: float | None = None, detection_threshold_dn: float | None = None,
+                     smooth_px: int = 5) -> dict:
+    """Probability that a drop of radius a at depth z is detected and passes the defocus test.
+
+    P = P_det P_size P_law P_focus: the detection of Eq. (19) for the streak's change
+    beta (E_r - E_b) (:func:`raingauge.gauge.rejection.detection_probability`), the
+    chance that a streak of about one pixel is measured at all
+    (:func:`raingauge.gauge.rejection.sizing_probability`),
+    the velocity law with the tolerance of the streak's own errors
+    (:func:`raingauge.gauge.rejection.streak_errors_px`, the same function the
+    gauge applies to each measured streak), and the focus test.
 
     Parameters
     ----------
@@ -89,8 +156,11 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
         The law the gauge tests against.
     rain_velocity_model : str, optional
         The law the drops follow (default: the same).
-    floor, k_sigma, width_sigma_px, motion_sigma_px :
+    floor, k_sigma :
         The velocity test's tolerance (see :mod:`raingauge.gauge.rejection`).
+    width_sigma_px, motion_sigma_px : float, optional
+        Fixed measurement errors [px]; default: each streak's own, from its
+        expected signal against ``noise_sigma_dn``.
     blur_floor_px, blur_relative, blur_sigma_px :
         The blur test: b <= max(floor, relative w), fitted with this standard error
         (``"pillbox"`` only).
@@ -102,11 +172,24 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
         the blur circle (w'^2 = w^2 + factor b^2, soft edges, the blur test applies).
     blur_variance_factor : float
         w'^2 = w^2 + factor b^2 (1 for a pillbox blur) [-].
+    contrast_dn : array_like
+        E_r - E_b, the drop's brightness over the background [gray levels]
+        (broadcast against ``z_m``); ``inf`` assumes every streak detected.
+    noise_sigma_dn : array_like, optional
+        Noise of one frame [gray levels] (default the profile's; broadcast against ``z_m``).
+        In rain the faint defocused drops add their flicker (Eq. 27): pass the measured
+        noise of the change image over sqrt(1.5).
+    detection_threshold_dn : float, optional
+        c of Eq. (19) [gray levels] (default the gauge's: the profile's, at least 1.2 sigma
+        of the profile's noise).
+    smooth_px : int
+        Rows of the along-fall smoothing before detection.
 
     Returns
     -------
-    dict of arrays over ``z_m``: ``p`` (probability), ``apparent_radius_m``,
-    ``apparent_velocity_m_s``, ``width_px``, ``blur_px``, ``motion_px``.
+    dict of arrays over ``z_m`` (broadcast with ``contrast_dn``): ``p`` (probability),
+    ``p_detect``, ``apparent_radius_m``, ``apparent_velocity_m_s``, ``width_px``, ``blur_px``,
+    ``motion_px``, ``change_dn`` (the streak's change per pixel).
     """
     from raingauge.physics.camera import blur_circle_px
     from raingauge.physics.drops import fall_velocity
@@ -117,7 +200,13 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
     z0 = profile.focus_distance_m
     if defocus_model not in DEFOCUS_MODELS:
         raise ValueError(f"unknown defocus model {defocus_model!r}; valid: {list(DEFOCUS_MODELS)}")
-    w = np.maximum(2.0 * f * radius_m / z, 1.0)
+    noise = np.asarray(profile.noise_sigma_dn if noise_sigma_dn is None else noise_sigma_dn, dtype=float)
+    c = (_default_threshold(profile, float(profile.noise_sigma_dn)) if detection_threshold_dn is None
+         else float(detection_threshold_dn))
+    noise_change = np.maximum(noise, 0.5) * math.sqrt(1.5)
+    contrast = np.asarray(contrast_dn, dtype=float)
+    a_img = f * radius_m / z
+    w = np.maximum(2.0 * a_img, 1.0)
     b = blur_circle_px(z, focal_length_px=f, f_number=profile.f_number, focus_distance_m=z0,
                        pixel_pitch_m=_pitch(profile))
     if defocus_model == "uniform":
@@ -128,22 +217,44 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
     v_true = float(fall_velocity(2.0 * radius_m, model=rain_velocity_model or velocity_model))
     v_app = v_true * z0 / z
     motion = f * v_true * profile.exposure_s / z
+    finite_c = np.isfinite(contrast)
+    change = streak_change_dn(a_img, w_app, motion, np.where(finite_c, contrast, 1e6))
+    plateau = change * w_app
+    if width_sigma_px is None or motion_sigma_px is None:
+        sw, sl = streak_errors_px(w_app, motion, plateau, noise_change)
+        sw = sw if width_sigma_px is None else np.broadcast_to(width_sigma_px, sw.shape)
+        sl = sl if motion_sigma_px is None else np.broadcast_to(motion_sigma_px, sl.shape)
+    else:
+        sw = np.broadcast_to(np.asarray(width_sigma_px, dtype=float), np.broadcast(z, contrast).shape)
+        sl = np.broadcast_to(np.asarray(motion_sigma_px, dtype=float), sw.shape)
     r = velocity_log_ratio(a_app, v_app, model=velocity_model)
-    tol = law_tolerance(a_app, w_app, motion, floor=floor, k_sigma=k_sigma, model=velocity_model)
-    sig = ratio_sigma(a_app, w_app, motion, width_sigma_px=width_sigma_px,
-                      motion_sigma_px=motion_sigma_px, model=velocity_model)
+    tol = law_tolerance(a_app, w_app, motion, floor=floor, k_sigma=k_sigma, model=velocity_model,
+                        width_sigma_px=sw, motion_sigma_px=sl)
+    sig = ratio_sigma(a_app, w_app, motion, width_sigma_px=sw, motion_sigma_px=sl, model=velocity_model)
     sig = np.maximum(sig, 1e-6)
-    p = np.where(np.isfinite(r), ndtr((tol - r) / sig) - ndtr((-tol - r) / sig), 0.0)
+    with np.errstate(invalid="ignore"):
+        p = np.where(np.isfinite(r) & np.isfinite(sig), ndtr((tol - r) / sig) - ndtr((-tol - r) / sig), 0.0)
     if defocus_model == "pillbox":
         bmax = max_blur_px(w, floor_px=blur_floor_px, relative=blur_relative)
         p = p * ndtr((bmax - np.sqrt(blur_variance_factor) * b) / blur_sigma_px)
     else:
-        q = (2.0 * f * radius_m / z / w_app) ** 2
-        p = p * ndtr((q - q_min) / q_sigma(q, w_app))
+        q = (2.0 * a_img / w_app) ** 2
+        rel = signal_rel_sigma(w_app, motion, plateau, noise_change)
+        with np.errstate(invalid="ignore"):
+            p = p * np.where(np.isfinite(sw) & np.isfinite(rel),
+                             ndtr((q - q_min) / q_sigma(q, w_app, width_sigma_px=np.where(np.isfinite(sw), sw, 1.0),
+                                                        signal_rel_sigma=np.where(np.isfinite(rel), rel, 1.0))),
+                             0.0)
+    p_det = np.where(finite_c, detection_probability(change, w_app, threshold_dn=c, noise_sigma_dn=noise,
+                                                     smooth_px=smooth_px, length_px=motion + w_app), 1.0)
+    margin = np.where(finite_c, detection_margin(change, w_app, threshold_dn=c, noise_sigma_dn=noise,
+                                                 smooth_px=smooth_px), np.inf)
+    p_size = sizing_probability(2.0 * a_img, margin, np.where(finite_c, row_snr(change, w_app, noise_change), np.inf))
+    p = p * p_det * p_size
     if not np.isfinite(v_true):
-        p = np.zeros_like(z)
-    return {"p": p, "apparent_radius_m": a_app, "apparent_velocity_m_s": v_app, "width_px": w,
-            "blur_px": b, "motion_px": motion}
+        p = np.zeros_like(p)
+    return {"p": p, "p_detect": p_det, "apparent_radius_m": a_app, "apparent_velocity_m_s": v_app,
+            "width_px": w, "blur_px": b, "motion_px": motion, "change_dn": change}
 
 
 def whole_streak_area_px2(motion_px, width_px, shape, *, margin_px: float = EDGE_MARGIN_PX) -> np.ndarray:
@@ -213,7 +324,7 @@ def effective_area_rate_px2_s(motion_px, width_px, shape, *, exposure_s: float, 
 
 @dataclass
 class SampleVolume:
-    """Sample volume of a camera profile per drop radius (tabulated).
+    """Sample volume of a camera profile per drop radius and drop contrast (tabulated).
 
     Parameters
     ----------
@@ -227,17 +338,39 @@ class SampleVolume:
     blur_variance_factor, defocus_model :
         See :func:`pass_probability`.
     radii_m : array, optional
-        Radius grid [m] (default 0.1-4 mm, 80 log-spaced points).
+        Radius grid [m] (default 0.1-4 mm, 60 log-spaced points).
+    contrast_dn : float
+        The drop contrast E_r - E_b of :meth:`kappa` when none is given [gray levels].
+    contrasts_dn : array, optional
+        Contrast grid of the table [gray levels] (default 1-255, 16 log-spaced points).
+    noise_sigma_dn, detection_threshold_dn : float, optional
+        Noise and Eq. (19) threshold c [gray levels] (default: the profile's, as the gauge uses them).
+    noise_factors : array, optional
+        Noise grid of the table, in units of ``noise_sigma_dn`` (rain's own flicker raises
+        the noise a streak is measured in, Eq. 27 [GargNayar2007]).
 
     Attributes
     ----------
+    kappa_cube : ndarray (n_radii, n_noises, n_contrasts)
+        kappa(a, sigma, C) [m^3/px^2] over ``noises_dn`` and ``contrasts_dn``.
+    kappa_table : ndarray (n_radii, n_contrasts)
+        kappa(a, C) [m^3/px^2] at the profile's noise.
     kappa_m3_px2 : ndarray
-        kappa(a) [m^3/px^2] on ``radii_m``.
+        kappa(a) [m^3/px^2] on ``radii_m`` at ``contrast_dn``.
     mean_depth_m : ndarray
         Mean depth of the accepted drops, weighted by the sampled space [m].
     apparent_radius_factor : ndarray
         (E[(a'/a)^3 | accepted])^(1/3): how much larger the accepted drops of
         radius a look at z0, the blur included [-].
+
+    Notes
+    -----
+    Drops are detected only where the background leaves them contrast
+    (Eqs. 17-19 [GargNayar2007]): over a frame whose backgrounds E_b vary, a
+    drop of radius a is sampled in the mean over the frame's pixels of
+    kappa(a, E_r - E_b) (:meth:`contrast_weights`, :meth:`kappa`), so the
+    classes still visible over part of the frame are counted up by the part
+    they are visible in, not lost.
     """
 
     profile: object
@@ -248,43 +381,211 @@ class SampleVolume:
     blur_variance_factor: float = 1.0
     defocus_model: str = "uniform"
     q_min: float = DEFAULT_Q_MIN
-    radii_m: np.ndarray = field(default_factory=lambda: np.geomspace(0.1e-3, 4.0e-3, 80))
+    radii_m: np.ndarray = field(default_factory=lambda: np.geomspace(0.1e-3, 4.0e-3, 60))
     min_width_px: float = 1.0
+    contrast_dn: float = DEFAULT_CONTRAST_DN
+    contrasts_dn: np.ndarray = field(default_factory=lambda: np.geomspace(1.0, 255.0, 16))
+    noise_sigma_dn: float | None = None
+    detection_threshold_dn: float | None = None
+    noise_factors: np.ndarray = field(default_factory=lambda: np.array([1.0, 1.4, 2.0, 2.8, 4.0, 5.6]))
 
     def __post_init__(self):
+        from raingauge.physics.camera import blur_circle_px
+
         prof = self.profile
         z0 = prof.focus_distance_m
         f = prof.focal_length_px
-        z = np.linspace(0.4 * z0, 2.5 * z0, 1600)
-        dz = z[1] - z[0]
-        kap, zbar, fac = [], [], []
+        self.contrasts_dn = np.sort(np.asarray(self.contrasts_dn, dtype=float))
+        self.radii_m = np.asarray(self.radii_m, dtype=float)
+        cgrid = np.append(self.contrasts_dn, float(self.contrast_dn))
+        noise0 = float(prof.noise_sigma_dn if self.noise_sigma_dn is None else self.noise_sigma_dn)
+        self.noises_dn = max(noise0, 0.3) * np.sort(np.asarray(self.noise_factors, dtype=float))
+        z_all = np.linspace(0.4 * z0, 2.5 * z0, 1600)
+        b_all = blur_circle_px(z_all, focal_length_px=f, f_number=prof.f_number, focus_distance_m=z0,
+                               pixel_pitch_m=_pitch(prof))
+        table, zbar, fac = [], [], []
         for a in self.radii_m:
-            res = pass_probability(a, z, prof, velocity_model=self.velocity_model,
+            # the accepted drops lie where the blur is at most about the width (q >= q_min):
+            # integrate over that span, generously widened
+            w_all = np.maximum(2.0 * f * a / z_all, 1.0)
+            near = np.nonzero(b_all <= 2.0 * w_all + 4.0)[0]
+            lo = z_all[max(near[0] - 1, 0)] if near.size else 0.9 * z0
+            hi = z_all[min(near[-1] + 1, z_all.size - 1)] if near.size else 1.1 * z0
+            z = np.linspace(lo, hi, 400)
+            dz = z[1] - z[0]
+            res = pass_probability(a, z[None, None, :], prof, velocity_model=self.velocity_model,
                                    rain_velocity_model=self.rain_velocity_model, floor=self.floor,
                                    k_sigma=self.k_sigma, blur_variance_factor=self.blur_variance_factor,
-                                   defocus_model=self.defocus_model, q_min=self.q_min)
+                                   defocus_model=self.defocus_model, q_min=self.q_min,
+                                   contrast_dn=cgrid[None, :, None], noise_sigma_dn=self.noises_dn[:, None, None],
+                                   detection_threshold_dn=self.detection_threshold_dn)
             wt = res["p"] * (z / f) ** 2 * dz
-            k = float(wt.sum())
-            kap.append(k)
-            if k > 0:
-                zbar.append(float((wt * z).sum() / k))
-                fac.append(float(((wt * (res["apparent_radius_m"] / a) ** 3).sum() / k) ** (1 / 3)))
+            k = wt.sum(axis=-1)                                  # (n_noises, n_contrasts + 1)
+            table.append(k)
+            kd, wd = float(k[0, -1]), wt[0, -1]
+            if kd > 0:
+                zbar.append(float((wd * z).sum() / kd))
+                a_app = np.broadcast_to(res["apparent_radius_m"], wt.shape)[0, -1]
+                fac.append(float(((wd * (a_app / a) ** 3).sum() / kd) ** (1 / 3)))
             else:
                 zbar.append(z0)
                 fac.append(1.0)
-        self.kappa_m3_px2 = np.array(kap)
+        full = np.array(table)
+        self.kappa_cube = full[:, :, :-1]
+        self.kappa_table = full[:, 0, :-1]
+        self.kappa_m3_px2 = full[:, 0, -1]
         self.mean_depth_m = np.array(zbar)
         self.apparent_radius_factor = np.array(fac)
         # below one pixel of focused width the size cannot be measured
         self.min_radius_m = self.min_width_px * z0 / (2.0 * f)
 
+    # -- contrast
+    def contrast_weights(self, contrast_dn) -> np.ndarray:
+        """Weights over ``contrasts_dn`` that average the table over a set of contrasts [-].
+
+        Linear interpolation in log contrast of each sample, averaged: the
+        kappa of a frame whose pixels show the drops these contrasts is
+        ``kappa_table @ weights``.  Contrasts below the grid detect nothing
+        (weight on no node), above it count as the largest.
+
+        Parameters
+        ----------
+        contrast_dn : array_like
+            E_r - E_b over the frame's pixels (a sample of them) [gray levels].
+
+        Returns
+        -------
+        (n_contrasts,) ndarray summing to the fraction of samples inside or above the grid.
+        """
+        c = np.asarray(contrast_dn, dtype=float).ravel()
+        c = c[np.isfinite(c)]
+        grid = np.log(self.contrasts_dn)
+        out = np.zeros(grid.size)
+        if c.size == 0:
+            return out
+        seen = c >= self.contrasts_dn[0]
+        lc = np.log(np.clip(c[seen], self.contrasts_dn[0], self.contrasts_dn[-1]))
+        i = np.clip(np.searchsorted(grid, lc, side="right") - 1, 0, grid.size - 2)
+        t = np.clip((lc - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0)
+        np.add.at(out, i, 1.0 - t)
+        np.add.at(out, i + 1, t)
+        return out / c.size
+
+    def histogram_weights(self, histogram, drop_brightness_dn: float) -> np.ndarray:
+        """:meth:`contrast_weights` of a frame from its histogram of background levels.
+
+        Parameters
+        ----------
+        histogram : (n_bins,) array
+            Counts of background levels in bins of :data:`BACKGROUND_BIN_DN`
+            (:func:`background_histogram`).
+        drop_brightness_dn : float
+            E_r [gray levels].
+        """
+        h = np.asarray(histogram, dtype=float)
+        total = h.sum()
+        if not total > 0:
+            return np.zeros(self.contrasts_dn.size)
+        centres = (np.arange(h.size) + 0.5) * BACKGROUND_BIN_DN
+        used = h > 0
+        per = np.array([self.contrast_weights([c]) for c in float(drop_brightness_dn) - centres[used]])
+        return (h[used, None] * per).sum(axis=0) / total
+
+    def hidden_share(self, weights, rate_mm_h: float, *, visible_min: float = 0.5,
+                     velocity_model: str | None = None) -> tuple[float, float]:
+        """Smallest drop diameter the frame's backgrounds leave visible [m], and the share of
+        the rain rate the invisible sizes may carry [-].
+
+        A size is visible where the background-weighted sample volume
+        (:meth:`visible_fraction`) keeps at least ``visible_min`` of its best;
+        visible sizes are counted up by their volume.  Sizes seen in less than
+        that share are counted up too, but their volume rests on the drop
+        brightness E_r (estimated from the streaks) near the detection limit,
+        so they count as possibly missing in the interval.  The share is that of the Marshall-Palmer spectrum at the
+        measured rate [MarshallPalmer1948] (steeper, richer in small drops,
+        than at the true, higher rate) over the measurable sizes; 1 when no
+        size is visible (the gauge cannot measure against this background).
+
+        Parameters
+        ----------
+        weights : (n_contrasts,) array
+            :meth:`contrast_weights` of the frames.
+        rate_mm_h : float
+            The measured rate [mm/h].
+        visible_min : float
+            Smallest visible fraction counted as seen [-].
+        velocity_model : str, optional
+            Law of the drops' speeds (default the volume's).
+        """
+        from raingauge.physics.drops import fall_velocity
+
+        d_min = 2.0 * float(self.min_radius_m)
+        d = np.geomspace(max(d_min, 0.1e-3), 8e-3, 200)
+        vis = self.visible_fraction(0.5 * d, weights=weights) >= visible_min
+        if not vis.any():
+            return float("inf"), 1.0
+        d_det = float(d[np.argmax(vis)])
+        v = np.nan_to_num(fall_velocity(d, model=velocity_model or self.rain_velocity_model or self.velocity_model),
+                          nan=0.0)
+        lam = 4.1e3 * max(float(rate_mm_h) if np.isfinite(rate_mm_h) else 0.5, 0.5) ** -0.21   # [1/m]
+        w = d ** 3 * v * np.exp(-lam * d) * np.gradient(d)
+        total = float(w.sum())
+        share = float(w[~vis].sum()) / total if total > 0 else 1.0
+        return d_det, float(min(max(share, 0.0), 1.0))
+
     # -- per radius
-    def kappa(self, radius_m) -> np.ndarray:
-        """kappa(a) [m^3 per px^2 of image], 0 below the measurable size."""
+    def _noise_slice(self, noise_dn) -> np.ndarray:
+        """kappa(a, C) (n_radii, n_contrasts) at a frame noise, linear between the grid's."""
+        if noise_dn is None or not np.isfinite(noise_dn):
+            return self.kappa_table
+        x = float(np.clip(noise_dn, self.noises_dn[0], self.noises_dn[-1]))
+        i = int(np.clip(np.searchsorted(self.noises_dn, x, side="right") - 1, 0, self.noises_dn.size - 2))
+        t = (x - self.noises_dn[i]) / (self.noises_dn[i + 1] - self.noises_dn[i])
+        return (1.0 - t) * self.kappa_cube[:, i, :] + t * self.kappa_cube[:, i + 1, :]
+
+    def kappa(self, radius_m, contrast_dn=None, *, weights=None, noise_dn=None) -> np.ndarray:
+        """kappa(a) [m^3 per px^2 of image], 0 below the measurable size.
+
+        Parameters
+        ----------
+        radius_m : array_like
+            Drop radius [m].
+        contrast_dn : float, optional
+            One drop contrast E_r - E_b [gray levels] (default ``self.contrast_dn``).
+        weights : (n_contrasts,) array, optional
+            The frame's :meth:`contrast_weights`: kappa averaged over its backgrounds.
+        noise_dn : float, optional
+            The frame's noise [gray levels] (the change image's over sqrt(1.5); default the
+            profile's).
+        """
         a = np.asarray(radius_m, dtype=float)
-        k = np.interp(np.log(np.clip(a, 1e-9, None)), np.log(self.radii_m), self.kappa_m3_px2,
-                      left=0.0, right=self.kappa_m3_px2[-1])
+        table = self._noise_slice(noise_dn)
+        if weights is not None:
+            col = table @ np.asarray(weights, dtype=float)
+        elif contrast_dn is not None:
+            col = table @ self.contrast_weights([float(contrast_dn)])
+        elif noise_dn is not None:
+            col = table @ self.contrast_weights([float(self.contrast_dn)])
+        else:
+            col = self.kappa_m3_px2
+        k = np.interp(np.log(np.clip(a, 1e-9, None)), np.log(self.radii_m), col, left=0.0, right=col[-1])
         return np.where(a >= self.min_radius_m, k, 0.0)
+
+    def visible_fraction(self, radius_m, *, weights) -> np.ndarray:
+        """Share of the sample volume over the nominal background (contrast ``contrast_dn``, a
+        dark scene) that a frame's backgrounds leave a drop of radius a [-] (0: invisible
+        everywhere, 1: as over a dark background; above 1 with more contrast).
+
+        Parameters
+        ----------
+        radius_m : array_like
+            Drop radius [m].
+        weights : (n_contrasts,) array
+            The frame's :meth:`contrast_weights`.
+        """
+        best = self.kappa(radius_m)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(best > 0, self.kappa(radius_m, weights=weights) / best, 0.0)
 
     def depth_m(self, radius_m) -> np.ndarray:
         """Mean depth of accepted drops of radius a [m]."""
@@ -305,7 +606,9 @@ class SampleVolume:
         p = pass_probability(radius_m, z, self.profile, velocity_model=self.velocity_model,
                              rain_velocity_model=self.rain_velocity_model, floor=self.floor,
                              k_sigma=self.k_sigma, blur_variance_factor=self.blur_variance_factor,
-                                   defocus_model=self.defocus_model, q_min=self.q_min)["p"]
+                             defocus_model=self.defocus_model, q_min=self.q_min,
+                             contrast_dn=self.contrast_dn, noise_sigma_dn=self.noise_sigma_dn,
+                             detection_threshold_dn=self.detection_threshold_dn)["p"]
         ok = np.nonzero(p >= p_min)[0]
         if ok.size == 0:
             return (z0, z0)

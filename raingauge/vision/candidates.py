@@ -126,6 +126,11 @@ def hysteresis_candidates(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, *,
         Lower threshold, 0 < c_low <= c [gray levels].
     tol : float, optional
         Largest |I_{n-1} - I_{n+1}| [gray levels] (stationarity half of Eq. (19)).
+        A pixel at c beyond it is no candidate.  A fainter pixel beyond it is
+        no candidate either, but it still links its neighbours into one
+        component: about one pixel in 150 of a faint streak fails a 3-sigma
+        test, and in a streak one or two pixels wide one missing pixel would
+        cut it into pieces, most without a pixel at c.
     valid : (M, N) bool array, optional
         Pixels where all three frames hold data.
     slack : (M, N) float array, optional
@@ -150,13 +155,19 @@ def hysteresis_candidates(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, *,
         spike -= np.asarray(slack, np.float32)
     low = spike >= np.float32(c_low)
     idx = np.flatnonzero(low.ravel())
+    moved = None
     if tol is not None and idx.size:
-        bad = np.abs(prev.ravel()[idx] - nxt.ravel()[idx]) > np.float32(tol)
-        low.ravel()[idx[bad]] = False
-        idx = idx[~bad]
+        moved = np.abs(prev.ravel()[idx] - nxt.ravel()[idx]) > np.float32(tol)
+        drop = moved & (spike.ravel()[idx] >= np.float32(c))
+        if c_low == c:
+            drop = moved
+        low.ravel()[idx[drop]] = False
+        idx, moved = idx[~drop], moved[~drop]
     if valid is not None:
+        inside = np.asarray(valid, dtype=bool).ravel()[idx]
         low &= np.asarray(valid, dtype=bool)
-        idx = idx[low.ravel()[idx]]
+        idx = idx[inside]
+        moved = moved[inside] if moved is not None else None
     if c_low == c or idx.size == 0:
         return low
     n, lab = cv2.connectedComponents(low.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
@@ -164,6 +175,9 @@ def hysteresis_candidates(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, *,
     high = spike.ravel()[idx] >= np.float32(c)
     keep = np.bincount(li[high], minlength=n) >= max(int(min_high), 1)
     keep[0] = False
+    take = keep[li]
+    if moved is not None:
+        take &= ~moved          # they link the streak but are not candidates themselves
     out = np.zeros(low.shape, bool)
-    out.ravel()[idx[keep[li]]] = True
+    out.ravel()[idx[take]] = True
     return out

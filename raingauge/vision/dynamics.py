@@ -10,6 +10,14 @@ direction and strength of the rain (the needle map, Fig. 11(e)).  Weak or
 non-directional correlation -- scene motion, ripples, noise (note 15) -- is
 not rain: this segments the frame into rain and non-rain regions.
 
+Beyond the paper: the edges of a textured object moving steadily in one
+direction give a strong correlation along one direction too (note 15 assumes
+their direction varies).  What rain alone has is independence from frame to
+frame: a drop lasts one exposure, so near a rain pixel of frame n the field
+of frame n-1 is no denser than elsewhere, while a moving object's false rain
+pixels reappear a few pixels away.  Cells whose lag-one persistence is well
+above chance are not rain (:func:`lag_one_persistence`).
+
 Cost.  Only rain pixels carry correlation (b = 0 contributes nothing), so the
 l x l neighbourhoods are gathered at the rain pixels alone (at most
 ``max_pixels`` of them per frame, taken evenly), projected on the masks with
@@ -33,7 +41,12 @@ __all__ = [
     "DynamicsField",
     "needle_map",
     "dominant_direction_deg",
+    "lag_one_persistence",
+    "persistent_cells",
 ]
+
+#: Rows per matrix product in :func:`rain_pixel_energies`.
+_GEMM_ROWS = 128
 
 #: Orientations of the masks of note 14 [deg], 0 = horizontal, counter-clockwise on screen.
 ORIENTATIONS_DEG = np.arange(0.0, 180.0, 10.0)
@@ -117,9 +130,96 @@ def rain_pixel_energies(b: np.ndarray, *, masks: np.ndarray, max_pixels: int | N
     base = rows * pw + cols  # (r + h - h, c + h - h): top-left of the window in padded coords
     dy, dx = np.mgrid[0:l, 0:l]
     offs = (dy * pw + dx).ravel()
-    neigh = padded.ravel()[base[:, None] + offs[None, :]]  # (P, l*l) uint8
-    energy = neigh.astype(np.float32) @ masks.reshape(K, -1).T
+    neigh = padded.ravel()[base[:, None] + offs[None, :]].astype(np.float32)  # (P, l*l)
+    mk = np.ascontiguousarray(masks.reshape(K, -1).T)
+    # Blocks of _GEMM_ROWS rows: a product this small is fastest on one thread,
+    # and a multithreaded BLAS (OpenBLAS threads larger ones) only contends
+    # with the rest of the frame loop for the cores.
+    energy = np.concatenate([neigh[i:i + _GEMM_ROWS] @ mk for i in range(0, neigh.shape[0], _GEMM_ROWS)])
     return rows, cols, energy, weight
+
+
+def lag_one_persistence(b_prev: np.ndarray, b: np.ndarray, *, radius_px: int = 3, block_px: int = 31
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """Lag-one persistence of the binary field: which rain pixels of frame n had one nearby in frame n-1.
+
+    A drop crosses the field of view of a pixel within one exposure, and the
+    drops of consecutive frames are independent (Sec. 4.1 [GargNayar2007]):
+    R_b(m p, T) is high only at displacements v_i T to 2 v_i T along the rain,
+    the length of a streak and more, so near a rain pixel of frame n the field
+    of frame n-1 is no denser than anywhere else.  The false rain pixels of a
+    moving textured object (its edges, after global motion compensation) move
+    with the object and reappear a few pixels away in the next frame.
+
+    Parameters
+    ----------
+    b_prev, b : (M, N) bool arrays
+        Binary rain fields of frames n-1 and n.
+    radius_px : int
+        A rain pixel is persistent when frame n-1 has a rain pixel within this
+        Chebyshev distance [px].
+    block_px : int
+        Side of the box over which the chance level (the local fraction of
+        pixels within ``radius_px`` of a rain pixel of frame n-1) is taken [px].
+
+    Returns
+    -------
+    near : (M, N) bool array
+        Rain pixels of frame n that are persistent.
+    chance : (M, N) float32 array
+        Probability that a pixel is persistent by chance (the local coverage).
+        Rain gives ``near.sum() ~ chance[b].sum()``; moving texture several times more.
+    """
+    import cv2
+
+    k = 2 * int(radius_px) + 1
+    dil = cv2.dilate(np.asarray(b_prev).view(np.uint8), np.ones((k, k), np.uint8))
+    chance = cv2.blur(dil.astype(np.float32), (int(block_px), int(block_px)), borderType=cv2.BORDER_REFLECT)
+    return np.asarray(b) & dil.view(bool), chance
+
+
+def persistent_cells(persistent: np.ndarray, chance: np.ndarray, *, max_ratio: float = 1.5,
+                     sigmas: float = 2.0) -> np.ndarray:
+    """Cells whose lag-one persistence is too high for rain (see :func:`lag_one_persistence`).
+
+    Parameters
+    ----------
+    persistent : array
+        Persistent rain pixels counted in each cell over the window.
+    chance : array
+        The count expected by chance (sum of the chance level at the cell's rain pixels).
+    max_ratio : float
+        Largest persistence over chance that rain may show.
+    sigmas : float
+        Poisson allowance on top [standard deviations].
+    """
+    chance = np.asarray(chance, np.float32)
+    return np.asarray(persistent) > max_ratio * chance + sigmas * np.sqrt(max_ratio * chance) + 1.0
+
+
+def _persistence_step(b, rows, cols, cid, prev_near, *, radius_px, side_px, grid):
+    """Persistence (0/1) and chance level at the evaluated rain pixels; the dilated field for the next frame."""
+    import cv2
+
+    k = 2 * int(radius_px) + 1
+    b8 = np.asarray(b).view(np.uint8) if b.dtype == np.bool_ else np.asarray(b, np.uint8)
+    # 0 / 255, so that the area average below keeps its fractions in uint8
+    dil = cv2.compare(cv2.dilate(b8, np.ones((k, k), np.uint8)), 0, cv2.CMP_GT)
+    if prev_near is None or rows.size == 0:
+        return (np.zeros(rows.size, np.float32), np.zeros(rows.size, np.float32), dil)
+    near = (prev_near[rows, cols] > 0).astype(np.float32)
+    # chance: the coverage of the previous frame's dilated field, on the grid
+    # of correlation cells, averaged over 3 x 3 of them
+    gh, gw = grid
+    M, N = b.shape
+    fh, fw = max(M // side_px, 1), max(N // side_px, 1)     # whole cells (a view, no copy)
+    cov = cv2.resize(prev_near[:fh * side_px, :fw * side_px], (fw, fh), interpolation=cv2.INTER_AREA)
+    if (fh, fw) != (gh, gw):
+        cov = cv2.copyMakeBorder(cov, 0, gh - fh, 0, gw - fw, cv2.BORDER_REPLICATE)
+    cov = cov.astype(np.float32) * np.float32(1.0 / 255.0)
+    cov = cv2.blur(cov, (3, 3), borderType=cv2.BORDER_REFLECT)
+    chance = cov.ravel()[cid]
+    return near, chance, dil
 
 
 @dataclasses.dataclass
@@ -149,6 +249,10 @@ class DynamicsField:
         Cell size [px].
     frames : int
         Frames in the window.
+    persistence : (GH, GW) or None
+        Lag-one persistence of the binary field over its chance level
+        (about 1 for rain, several for moving texture); see
+        :func:`lag_one_persistence`.
     """
 
     energy: np.ndarray
@@ -160,6 +264,7 @@ class DynamicsField:
     cell: int
     frames: int
     shape: tuple[int, int]
+    persistence: np.ndarray | None = None
 
     def region_mask(self, *, dilate_px: int = 0) -> np.ndarray:
         """Rain region at pixel resolution, (M, N) bool."""
@@ -217,12 +322,24 @@ class RainDynamics:
         Rain is stationary in time (Sec. 4.1): a rain region must have seen
         rain pixels in at least this fraction of the window's frames (and in
         two at least).  An object edge seen in one or two frames is not rain.
+    persistence_px : int
+        Radius of the lag-one test [px] (see :func:`lag_one_persistence`);
+        0 turns the test off.
+    max_persistence : float
+        Rain cells need a lag-one persistence at most this many times the
+        chance level (1 for rain).  The binary field of a moving textured
+        object reappears next frame a few pixels away; rain does not.
+    persistence_box : int
+        The persistence is pooled over about ``persistence_box`` x
+        ``persistence_box`` field cells [cells] (more counts than the
+        direction needs, for a steadier ratio).
     """
 
     def __init__(self, shape: tuple[int, int], *, l: int = 11, f: int = 30, cell: int = 3, smooth: int = 7,
                  max_pixels: int = 2000, min_ratio: float = 2.5, min_strength: float = 0.08,
                  min_events: float = 20.0, max_angle_dev_deg: float | None = 30.0,
-                 min_frame_fraction: float = 1.0 / 6.0, stride: int | None = None):
+                 min_frame_fraction: float = 1.0 / 6.0, stride: int | None = None,
+                 persistence_px: int = 3, max_persistence: float = 1.5, persistence_box: int = 5):
         if f < 1:
             raise ValueError(f"window f must be at least one frame, got {f!r}")
         if cell < 1 or smooth < 1:
@@ -254,6 +371,14 @@ class RainDynamics:
         self._sbh, self._sbw = self.gh // st, self.gw // st
         self._acc = np.zeros((self._sbh * self._sbw, self.K), np.float64)
         self._cnt = np.zeros(self._sbh * self._sbw, np.float64)
+        # lag-one persistence: rain pixels near a rain pixel of the previous
+        # frame, and the number expected by chance
+        self.persistence_px = int(persistence_px)
+        self.max_persistence = float(max_persistence)
+        self.persistence_box = int(persistence_box)
+        self._pers = np.zeros(self._sbh * self._sbw, np.float64)
+        self._pers_chance = np.zeros(self._sbh * self._sbw, np.float64)
+        self._prev_near: np.ndarray | None = None
         self._ring: deque = deque()
 
     @property
@@ -264,6 +389,9 @@ class RainDynamics:
     def reset(self) -> None:
         self._acc[:] = 0
         self._cnt[:] = 0
+        self._pers[:] = 0
+        self._pers_chance[:] = 0
+        self._prev_near = None
         self._frames_seen[:] = 0
         self._ring.clear()
 
@@ -275,6 +403,11 @@ class RainDynamics:
         rows, cols, energy, w = rain_pixel_energies(b, masks=self.masks, max_pixels=self.max_pixels)
         side = self.cell * self.stride
         cid = (rows // side) * self._sbw + cols // side
+        near = chance = None
+        if self.persistence_px > 0:
+            near, chance, self._prev_near = _persistence_step(
+                b, rows, cols, cid, self._prev_near, radius_px=self.persistence_px, side_px=side,
+                grid=(self._sbh, self._sbw))
         # Sum the frame's contributions per cell (sorted segments, no scatter-add).
         if cid.size:
             order = np.argsort(cid, kind="stable")
@@ -283,19 +416,28 @@ class RainDynamics:
             ucid = cs[starts]
             e = np.add.reduceat(energy[order], starts, axis=0).astype(np.float64) * w
             n = np.diff(np.r_[starts, cs.size]).astype(np.float64) * w
+            if near is not None:
+                pn = np.add.reduceat(near[order], starts).astype(np.float64) * w
+                pc = np.add.reduceat(chance[order], starts).astype(np.float64) * w
+            else:
+                pn = pc = np.zeros(ucid.size)
         else:
             ucid = cid
             e = np.zeros((0, self.K))
-            n = np.zeros(0)
+            n = pn = pc = np.zeros(0)
         self._acc[ucid] += e
         self._cnt[ucid] += n
+        self._pers[ucid] += pn
+        self._pers_chance[ucid] += pc
         blocks = np.unique((rows // self.block) * self.bw + cols // self.block)
         self._frames_seen[blocks] += 1
-        self._ring.append((ucid, e, n, blocks))
+        self._ring.append((ucid, e, n, blocks, pn, pc))
         while len(self._ring) > self.f:
-            ocid, oe, on, ob = self._ring.popleft()
+            ocid, oe, on, ob, opn, opc = self._ring.popleft()
             self._acc[ocid] -= oe
             self._cnt[ocid] -= on
+            self._pers[ocid] -= opn
+            self._pers_chance[ocid] -= opc
             self._frames_seen[ob] -= 1
 
     def field(self) -> DynamicsField:
@@ -334,6 +476,19 @@ class RainDynamics:
         by = np.minimum((cy * self.cell) // self.block, self.bh - 1)
         bx = np.minimum((cx * self.cell) // self.block, self.bw - 1)
         rain &= seen[by[:, None], bx[None, :]] >= need
+        persistence = None
+        if self.persistence_px > 0:
+            # pooled over persistence_box x persistence_box blocks (about 30 px at the defaults)
+            pb = (self.persistence_box, self.persistence_box)
+            pers = cv2.boxFilter(self._pers.reshape(bh, bw).astype(np.float32), -1, pb, normalize=False,
+                                 borderType=cv2.BORDER_CONSTANT)
+            pch = cv2.boxFilter(self._pers_chance.reshape(bh, bw).astype(np.float32), -1, pb, normalize=False,
+                                borderType=cv2.BORDER_CONSTANT)
+            pers = np.maximum(pers, 0.0)
+            pch = np.maximum(pch, 0.0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                persistence = np.where(pch > 0, pers / np.maximum(pch, 1e-12), np.where(pers > 0, np.inf, 0.0))
+            rain &= ~persistent_cells(pers, pch, max_ratio=self.max_persistence)
         if self.max_angle_dev_deg is not None and np.any(rain):
             # Within a frame rain falls in one direction (Sec. 4.1); cells that
             # disagree with the dominant direction are scene motion.
@@ -344,7 +499,7 @@ class RainDynamics:
             rain &= dev <= self.max_angle_dev_deg
         return DynamicsField(energy=energy, strength=emax, ratio=ratio, direction_deg=direction,
                              events=events, rain=rain, cell=self.cell * st, frames=len(self._ring),
-                             shape=self.shape)
+                             shape=self.shape, persistence=persistence)
 
 
 def dominant_direction_deg(field: DynamicsField) -> float:

@@ -33,6 +33,8 @@ __all__ = [
     "warp_to",
     "MotionTracker",
     "transform_magnitude_px",
+    "is_affine",
+    "is_translation",
 ]
 
 MOTION_MODELS = ("none", "translation", "euclidean")
@@ -188,6 +190,18 @@ def estimate_motion(ref: np.ndarray, moving: np.ndarray, *, model: str = "transl
     return C @ Wf @ np.linalg.inv(C)
 
 
+def is_affine(M: np.ndarray) -> bool:
+    """The 3x3 transform has no perspective part (last row 0, 0, 1)."""
+    r = M[2]
+    return abs(float(r[0])) < 1e-12 and abs(float(r[1])) < 1e-12 and abs(float(r[2]) - 1.0) < 1e-12
+
+
+def is_translation(M: np.ndarray) -> bool:
+    """The 3x3 transform is a pure translation (to 1e-9)."""
+    return (is_affine(M) and abs(float(M[0, 0]) - 1.0) < 1e-9 and abs(float(M[1, 1]) - 1.0) < 1e-9
+            and abs(float(M[0, 1])) < 1e-9 and abs(float(M[1, 0])) < 1e-9)
+
+
 def transform_magnitude_px(M: np.ndarray, shape: tuple[int, int]) -> float:
     """Largest displacement [px] that ``M`` applies to the corners of a (rows, cols) frame."""
     h, w = shape
@@ -270,8 +284,9 @@ def warp_to(frame: np.ndarray, M: np.ndarray, *, min_shift_px: float | None = No
         return frame, None
     flags = cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP
     src = frame if frame.dtype in (np.uint8, np.float32) else frame.astype(np.float32)
-    affine = np.allclose(M[2], [0, 0, 1])
-    if affine and np.allclose(M[:2, :2], np.eye(2)) and src.dtype == np.float32:
+    affine = is_affine(M)
+    translation = affine and is_translation(M)
+    if translation and src.dtype == np.float32:
         out = _translate_cubic(src, float(M[0, 2]), float(M[1, 2]))
     elif affine:
         out = cv2.warpAffine(src, M[:2].astype(np.float64), (w, h), flags=flags,
@@ -280,7 +295,7 @@ def warp_to(frame: np.ndarray, M: np.ndarray, *, min_shift_px: float | None = No
         out = cv2.warpPerspective(src, M, (w, h), flags=flags, borderMode=cv2.BORDER_REPLICATE)
     valid = None
     if with_valid:
-        if affine and np.allclose(M[:2, :2], np.eye(2)):
+        if translation:
             dx, dy = M[0, 2], M[1, 2]
             valid = np.zeros((h, w), dtype=bool)
             x0 = max(int(math.ceil(-dx)), 0)

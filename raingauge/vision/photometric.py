@@ -29,6 +29,8 @@ __all__ = [
     "StreakFits",
     "Streak",
     "beta_max_for_exposure",
+    "slope_uncertainty",
+    "selection_pull",
 ]
 
 
@@ -60,6 +62,123 @@ def beta_max_for_exposure(exposure_s: float, *, radius_m: float = 3.5e-3, veloci
         tau = 4.0 * radius_m / (200.0 * math.sqrt(radius_m))
         return tau / exposure_s
     return float(beta_max(exposure_s, radius_m=radius_m, velocity_model=velocity_model))
+
+
+def selection_pull(margin):
+    """Mean noise of I_{n-1} of a pixel that passed the spike test, in units of sigma [dimensionless].
+
+    Parameters
+    ----------
+    margin : array
+        The pixel's one-frame change above the selection threshold, in units
+        of the noise of a frame difference, sqrt(2) sigma [dimensionless].
+
+    Returns
+    -------
+    array
+        |E[e_{n-1} | selected]| / sigma = phi(d) / (sqrt(2) Phi(d)), d = max(margin, 0).
+
+    Notes
+    -----
+    Eq. (19) keeps a pixel when I_n - I_{n-1} = s + e_n - e_{n-1} >= c.  With
+    N = e_n - e_{n-1} (variance 2 sigma^2) and E[e_{n-1} | N] = -N / 2, the
+    truncated-normal mean gives E[e_{n-1} | N >= -(s - c)] =
+    -(sigma / sqrt 2) phi(d) / Phi(d) with d = (s - c) / (sqrt 2 sigma):
+    0.56 sigma at the threshold, 0.20 one noise level above it and 0.04 two
+    above.  Pixels at or below the threshold are given the value at d = 0.
+    """
+    d = np.maximum(np.asarray(margin, dtype=np.float64), 0.0)
+    from scipy.special import log_ndtr
+
+    log_phi = -0.5 * d * d - 0.5 * math.log(2.0 * math.pi)
+    return np.exp(log_phi - log_ndtr(d)) / math.sqrt(2.0)
+
+
+def slope_uncertainty(vxx, rss, n, near_dev, *, noise_sigma: float, score_sq=None, n_clusters=None):
+    """Standard error and selection shift of the Eq. (18) slope fitted over a streak [GargNayar2007].
+
+    The fit regresses the change y = I_n - I_{n+1} on the background
+    x = I_{n-1} over the K pixels of a streak.  Both carry camera noise of
+    standard deviation sigma, and the pixels were *selected* by a threshold
+    on the same noisy frames (Eq. 19), so a faint streak on a background of
+    little contrast gives a slope that is both noisy and biased.  The slope is
+    judged against what the noise can do rather than by a hard cut.
+
+    Parameters
+    ----------
+    vxx : array
+        Sum of squared deviations of x about its mean over each streak
+        [gray levels^2].
+    rss : array
+        Residual sum of squares of the least-squares line [gray levels^2].
+    n : array
+        Pixels per streak, K [px].
+    near_dev : array
+        Sum over the streak's pixels of |y_i - mean(y)| weighted by the
+        pixel's :func:`selection_pull` [gray levels].
+    noise_sigma : float
+        Camera noise standard deviation per frame [gray levels].
+    score_sq : array, optional
+        Sum over the blocks of pixels of each streak of
+        (sum_block r_i (x_i - mean x))^2, r the residuals [gray levels^4].
+    n_clusters : array, optional
+        Blocks per streak.
+
+    Returns
+    -------
+    se : array
+        Standard error of beta [dimensionless]; ``inf`` when the background
+        does not vary over the streak (Eq. (18) cannot refute it).
+    shift : array
+        Largest amount by which the selection can have lowered beta
+        [dimensionless]; it never raises it.
+
+    Notes
+    -----
+    se^2 = s^2 / S_xx with s^2 the larger of the residual variance
+    RSS / (K - 2) and the noise variance of y, 2 sigma^2.  The residual alone
+    is too optimistic for faint streaks: the threshold truncates the scatter
+    of y from below, so a few pixels of a 4-gray-level streak give a tiny
+    residual and an apparently precise, wrong slope.  The residual is kept
+    when larger (the change varies along a real streak's edges, where the
+    drop covers a pixel for part of tau).
+
+    Selection: a pixel whose change is near the threshold c passes Eq. (19)
+    more easily when the noise e_x of I_{n-1} is negative
+    (:func:`selection_pull`), and these are the pixels of smaller y.  The
+    least-squares slope moves by sum_i E[e_x,i] (y_i - mean y) / S_xx,
+    positive in dy/dx (beta lowered) and at most
+    sigma sum_i pull_i |y_i - mean y| / S_xx.  Pixels far above the threshold
+    are selected whatever their noise and contribute nothing: a bright
+    streak gets no allowance.
+
+    Neighbouring pixels do not deviate from the line independently: a drop
+    covers the pixels at a streak's edges for part of tau only (a smaller beta
+    and alpha there, the same along the whole edge), and streaks of two drops
+    that touch form one component with two lines.  With ``score_sq`` the
+    cluster-robust (sandwich) variance over blocks of pixels [LiangZeger1986],
+    G / (G - 1) sum_g (sum_{i in g} r_i (x_i - mean x))^2 / S_xx^2, is used
+    when it exceeds the independent-pixel one.
+    """
+    vxx = np.asarray(vxx, dtype=np.float64)
+    rss = np.asarray(rss, dtype=np.float64)
+    n = np.asarray(n, dtype=np.float64)
+    near_dev = np.asarray(near_dev, dtype=np.float64)
+    if not (math.isfinite(noise_sigma) and noise_sigma >= 0):
+        raise ValueError(f"noise_sigma must be a non-negative number of gray levels, got {noise_sigma!r}")
+    sigma = float(noise_sigma)
+    s2 = np.maximum(rss / np.maximum(n - 2.0, 1.0), 2.0 * sigma * sigma)
+    ok = (vxx > 0) & (n > 2)
+    vxx_d = np.where(ok, vxx, 1.0)
+    var = s2 / vxx_d
+    if score_sq is not None:
+        g = np.asarray(n_clusters, dtype=np.float64)
+        multi = g > 1
+        var_cr = np.where(multi, g / np.where(multi, g - 1.0, 1.0), 0.0) * np.asarray(score_sq, np.float64) / vxx_d ** 2
+        var = np.maximum(var, var_cr)
+    se = np.where(ok, np.sqrt(var), np.inf)
+    shift = np.where(ok, sigma * near_dev / vxx_d, np.inf)
+    return se, shift
 
 
 def label_streaks(mask: np.ndarray, *, connectivity: int = 8) -> tuple[np.ndarray, int]:
@@ -174,7 +293,7 @@ class StreakFits:
     mean_background: np.ndarray
     beta: np.ndarray            # Eq. (18) slope (positive: change falls with background)
     alpha: np.ndarray           # Eq. (18) intercept [gray levels]
-    beta_se: np.ndarray         # standard error of beta
+    beta_se: np.ndarray         # standard error of beta (cluster-robust for streaks the plain one refutes)
     residual_rms: np.ndarray    # rms deviation from the line [gray levels]
     background_change_rms: np.ndarray  # rms of I_{n-1} - I_{n+1} over the streak [gray levels]
     linear: np.ndarray          # bool: passes the linearity test
@@ -214,7 +333,7 @@ class StreakFits:
 def fit_streaks(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, mask: np.ndarray, *,
                 beta_max: float, labels: tuple[np.ndarray, int] | None = None,
                 noise_sigma: float = 1.0, min_pixels: int = 5, max_relative_residual: float = 0.35,
-                residual_sigmas: float = 3.0, slope_sigmas: float = 2.0) -> StreakFits:
+                residual_sigmas: float = 3.0, slope_sigmas: float = 2.0, cluster_px: int = 8) -> StreakFits:
     """Fit Eq. (18) to every streak of a candidate mask [GargNayar2007].
 
     Parameters
@@ -241,7 +360,16 @@ def fit_streaks(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, mask: np.nda
     residual_sigmas : float
         Noise allowance of the linearity test [standard deviations].
     slope_sigmas : float
-        The slope is accepted when beta +- slope_sigmas * se(beta) meets [0, beta_max].
+        The slope is accepted when [beta - k se, beta + k se + shift] meets
+        [0, beta_max], with k = slope_sigmas, se the standard error of beta
+        given the noise and shift the largest lowering of beta by the
+        threshold selection (:func:`slope_uncertainty`).  The shift and the
+        cluster-robust error only widen the interval, so they are evaluated
+        for the streaks the plain interval refutes.
+    cluster_px : int
+        Side of the square blocks of pixels whose residuals are taken as
+        correlated in the slope's error [px] (cluster-robust variance, see
+        :func:`slope_uncertainty`); 0 or 1 treats pixels as independent.
 
     Notes
     -----
@@ -253,15 +381,22 @@ def fit_streaks(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, mask: np.nda
     only bias is the errors-in-variables attenuation towards beta = 0, which
     lies inside the accepted range.  On a uniform background the slope is
     undetermined (large ``beta_se``) and the streak is kept: Eq. (18) cannot
-    refute it.
+    refute it.  The slope's error comes from the noise, not from the scatter
+    of the selected pixels alone: a faint streak (a few gray levels, a few
+    noise levels) has a slope barely measurable over its background, and the
+    threshold that selected its pixels biases that slope negative; both are
+    allowed for (:func:`slope_uncertainty`, :func:`selection_pull`), so faint
+    rain is no longer rejected for a slope the noise made, while a bright
+    blob whose change grows with the background (beta < 0) or follows it
+    (beta ~ 1) is still refuted.
     """
     return _fit(prev, cur, nxt, mask, beta_max=beta_max, labels=labels, noise_sigma=noise_sigma,
                 min_pixels=min_pixels, max_relative_residual=max_relative_residual,
-                residual_sigmas=residual_sigmas, slope_sigmas=slope_sigmas)[0]
+                residual_sigmas=residual_sigmas, slope_sigmas=slope_sigmas, cluster_px=cluster_px)[0]
 
 
 def _fit(prev, cur, nxt, mask, *, beta_max, labels, noise_sigma, min_pixels, max_relative_residual,
-         residual_sigmas, slope_sigmas):
+         residual_sigmas, slope_sigmas, cluster_px=8):
     if not (math.isfinite(beta_max) and beta_max > 0):
         raise ValueError(f"beta_max must be a positive number, got {beta_max!r}")
     if labels is None:
@@ -320,11 +455,45 @@ def _fit(prev, cur, nxt, mask, *, beta_max, labels, noise_sigma, min_pixels, max
     vxx_d = np.where(determined, vxx, 1.0)
     slope = np.where(determined, vxy / vxx_d, 0.0)
     rss = np.maximum(vyy - slope * vxy, 0.0)
-    dof = np.maximum(cnt - 2.0, 1.0)
     resid_rms = np.sqrt(rss / safe)
-    se = np.where(determined & (cnt > 2), np.sqrt(rss / dof) / np.sqrt(vxx_d), np.inf)
     beta = -slope
     alpha = my - slope * mx
+    vxx_fit = np.where(determined, vxx, 0.0)
+    zero = np.zeros(m)
+    se, shift = slope_uncertainty(vxx_fit, rss, cnt, zero, noise_sigma=float(noise_sigma))
+    with np.errstate(invalid="ignore"):
+        refuted = ~((beta + slope_sigmas * se >= 0.0) & (beta - slope_sigmas * se <= beta_max))
+    if refuted.any():
+        # Only a streak the independent-pixel error refutes needs the wider
+        # allowances (they can only widen the interval): the selection shift
+        # and the cluster-robust error, on its pixels alone.
+        on = refuted[lj]
+        sj, sx_, sy_, sz_, sidx = lj[on], x[on], y[on], z[on], idx[on]
+        # Mean noise of I_{n-1} among the pixels that passed the threshold, in
+        # units of sigma, from each pixel's one-frame change above the
+        # streak's weakest (an estimate of the threshold it was selected by).
+        spike = sy_ + sz_ - np.maximum(sx_, sz_)
+        smin = np.full(m, np.inf)
+        _segment_min(smin, sj, spike)
+        pull = selection_pull((spike - smin[sj]) / (math.sqrt(2.0) * max(float(noise_sigma), 1e-12)))
+        near_dev = np.bincount(sj, pull * np.abs(sy_ - my[sj]), m)
+        score_sq = n_clusters = None
+        if cluster_px and cluster_px > 1:
+            # residual scores summed over blocks of cluster_px x cluster_px pixels of each streak
+            bpx = int(cluster_px)
+            nbc = cols // bpx + 1
+            block = (sidx // cols) // bpx * nbc + (sidx % cols) // bpx
+            stride = (lab.shape[0] // bpx + 1) * nbc
+            uniq, inv = np.unique(sj * stride + block, return_inverse=True)
+            owner = uniq // stride
+            res = sy_ - my[sj] - slope[sj] * (sx_ - mx[sj])
+            g = np.bincount(inv, res * (sx_ - mx[sj]), uniq.size)
+            score_sq = np.bincount(owner, g * g, m)
+            n_clusters = np.bincount(owner, minlength=m)
+        se_w, shift_w = slope_uncertainty(vxx_fit, rss, cnt, near_dev, noise_sigma=float(noise_sigma),
+                                          score_sq=score_sq, n_clusters=n_clusters)
+        se = np.where(refuted, se_w, se)
+        shift = np.where(refuted, shift_w, 0.0)
 
     noise_dn = residual_sigmas * math.sqrt(2.0) * float(noise_sigma)
     allowance = noise_dn + max_relative_residual * np.maximum(my, 0.0)
@@ -334,7 +503,7 @@ def _fit(prev, cur, nxt, mask, *, beta_max, labels, noise_sigma, min_pixels, max
     stationary = bg_change <= allowance
     with np.errstate(invalid="ignore"):
         lo = beta - slope_sigmas * se
-        hi = beta + slope_sigmas * se
+        hi = beta + slope_sigmas * se + shift
     slope_ok = (hi >= 0.0) & (lo <= beta_max)
     accepted = linear & slope_ok & stationary & (my > 0)
 
@@ -387,7 +556,7 @@ def photometric_filter(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, mask:
                        beta_max: float, labels: tuple[np.ndarray, int] | None = None,
                        noise_sigma: float = 1.0, min_pixels: int = 5,
                        max_relative_residual: float = 0.35, residual_sigmas: float = 3.0,
-                       slope_sigmas: float = 2.0) -> tuple[np.ndarray, StreakFits]:
+                       slope_sigmas: float = 2.0, cluster_px: int = 8) -> tuple[np.ndarray, StreakFits]:
     """Keep the streaks that obey the photometric constraint, Eq. (18) [GargNayar2007].
 
     Parameters are those of :func:`fit_streaks`.
@@ -402,7 +571,7 @@ def photometric_filter(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, mask:
     """
     fits, idx, li = _fit(prev, cur, nxt, mask, beta_max=beta_max, labels=labels, noise_sigma=noise_sigma,
                          min_pixels=min_pixels, max_relative_residual=max_relative_residual,
-                         residual_sigmas=residual_sigmas, slope_sigmas=slope_sigmas)
+                         residual_sigmas=residual_sigmas, slope_sigmas=slope_sigmas, cluster_px=cluster_px)
     out = np.zeros(fits.labels.shape, dtype=bool)
     out.ravel()[idx] = fits.accepted[li]
     return out, fits

@@ -11,6 +11,12 @@ for every input, the first and the last included.  A frame that repeats its
 predecessor (frame-rate conversion) cannot show a one-frame spike; repeats are
 set aside, the algorithm runs on the distinct frames, and a repeat gets the
 output of the frame it repeats.
+
+Beyond the paper: a rain region can hold a moving object (rain falls in
+front of it).  Sec. 5.2 would replace its one-frame spikes and its 2- and
+3-frame "runs" (a pattern a few frames wide crossing a pixel) by the
+neighbouring frames, smearing the object; the removal leaves alone the parts
+of frame n that local motion sweeps densely (:func:`local_motion_mask`).
 """
 
 from __future__ import annotations
@@ -23,11 +29,13 @@ import numpy as np
 
 from raingauge.vision.candidates import candidates, hysteresis_candidates, luminance
 from raingauge.vision.dynamics import DynamicsField, RainDynamics
-from raingauge.vision.motion import WARP_MIN_SHIFT_PX, MotionTracker, transform_magnitude_px, warp_to
+from raingauge.vision.motion import (WARP_MIN_SHIFT_PX, MotionTracker, is_affine, is_translation,
+                                     transform_magnitude_px, warp_to)
 from raingauge.vision.photometric import StreakFits, beta_max_for_exposure, photometric_filter
-from raingauge.vision.removal import RUNS, remove_window, run_pair, run_prefilter
+from raingauge.vision.removal import RUNS, multi_frame_hits, remove_window, run_pair
 
-__all__ = ["detect_streaks", "Derainer", "DerainedFrame", "derain_clip", "estimate_noise_sigma"]
+__all__ = ["detect_streaks", "Derainer", "DerainedFrame", "derain_clip", "estimate_noise_sigma",
+           "local_motion_mask", "registration_slack"]
 
 
 def detect_streaks(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, *, c: float = 3.0, beta_max: float,
@@ -94,13 +102,18 @@ class DerainedFrame:
     rain : (M, N) bool
         Pixels replaced (rain detected inside a rain region).
     detected : (M, N) bool
-        The binary rain field b of the frame (accepted streaks, before segmentation).
+        Rain pixels of the frame, before segmentation: the binary field b
+        (accepted streaks) and, inside the rain region and away from local
+        scene motion, the pixels hit by drops in 2 or 3 consecutive frames
+        (:func:`raingauge.vision.removal.multi_frame_hits`, Sec. 5.2).
     region : (M, N) bool
         The rain region used.
     field : DynamicsField or None
         The correlation field (needle map) used.
     repeat : bool
         The input frame repeated its predecessor.
+    b : (M, N) bool or None
+        The binary rain field b alone (Eq. 19 and Eq. 18, one-frame spikes).
     """
 
     index: int
@@ -110,6 +123,7 @@ class DerainedFrame:
     region: np.ndarray
     field: DynamicsField | None
     repeat: bool = False
+    b: np.ndarray | None = None
 
 
 @dataclasses.dataclass
@@ -124,6 +138,8 @@ class _Unique:
     rise: np.ndarray | None = None   # I_n - I_{n-1} >= c (own coordinates)
     fall: np.ndarray | None = None   # I_n - I_{n+1} >= c
     warped: bool = False
+    moving: np.ndarray | None = None   # local scene motion (see local_motion_mask)
+    aligned: tuple | None = None       # luminance of units k-1, k+1 warped into this one
 
 
 class Derainer:
@@ -181,6 +197,19 @@ class Derainer:
         Distinct frames gathered before the first output, so that the first
         frames are segmented with a correlation built over several frames
         (default f // 2; 0 gives the smallest latency, 3 frames).
+    motion_window_px, motion_min_px, motion_contrast
+        Local scene motion left alone by the removal (see
+        :func:`local_motion_mask`): windows of ``motion_window_px`` pixels
+        [px] holding at least ``motion_min_px`` pixels [px] swept through three
+        values, with changes of ``motion_contrast`` times c and the
+        stationarity tolerance.  A window of 0 turns the test off.
+    near_px : int
+        Reach of the relaxed run test of the detection [px]: within this
+        distance of the streaks of b, a pixel whose centre frame is c above
+        the unaffected frames of a 2- or 3-frame run (the run's other frames
+        c / 2) is rain (see :func:`raingauge.vision.removal.multi_frame_hits`);
+        0 keeps only the free-standing runs.  The removal keeps the paper's
+        rule.
     """
 
     LOOKAHEAD = 3
@@ -190,7 +219,8 @@ class Derainer:
                  noise_sigma: float | str | None = None, min_pixels: int = 5, grow_px: int = 1,
                  runs: bool = True, repeat_tol: float = 0.1, tol: float | str | None = "auto",
                  dynamics: dict | None = None, segment_every: int = 6, warmup: int | None = None,
-                 registration_px: float = 0.15, c_low: float | None = None):
+                 registration_px: float = 0.15, c_low: float | None = None, motion_window_px: int = 15,
+                 motion_min_px: int = 30, motion_contrast: float = 2.5, near_px: int = 1):
         self.profile = profile
         self._c_auto = c is None and profile is None
         if c is None:
@@ -228,6 +258,11 @@ class Derainer:
             raise ValueError(f"c_low must be a positive number of gray levels, got {c_low!r}")
         self.c_low = c_low
         self.warmup = self.f // 2 if warmup is None else int(warmup)
+        self.motion_window_px = int(motion_window_px)
+        self.motion_min_px = int(motion_min_px)
+        self.motion_contrast = float(motion_contrast)
+        self.near_px = int(near_px)
+
         self.streak_log: list[tuple[int, int]] = []   # (frame index, accepted streaks)
         self._run_cache: dict[tuple[int, int], np.ndarray] = {}
 
@@ -343,18 +378,19 @@ class Derainer:
             # Warped neighbours carry a registration error of a fraction of a
             # pixel, i.e. an intensity error proportional to the local gradient:
             # thin bright lines would otherwise look like one-frame spikes.
-            gx = cv2.Sobel(cur, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
-            gy = cv2.Sobel(cur, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
-            slack = cv2.multiply(cv2.magnitude(gx, gy), float(self.registration_px))
-            thr = cv2.subtract(thr, slack)
+            slack = registration_slack(u.raw if (self.profile is None and u.raw.ndim == 2) else cur,
+                                       registration_px=self.registration_px)
+            thr = cv2.subtract(thr, slack, dtype=cv2.CV_32F)
         rise = cv2.compare(prev, thr, cv2.CMP_LE)
         fall = cv2.compare(nxt, thr, cv2.CMP_LE)
         cand = cv2.bitwise_and(rise, fall)      # Eq. (19)
         tol = self.tol
         if self._tol_auto:
             tol = 3.0 * math.sqrt(2.0) * self.noise_sigma
+        apn = None
         if tol is not None:                     # ... with I_{n-1} = I_{n+1}
-            cand = cv2.bitwise_and(cand, cv2.compare(cv2.absdiff(prev, nxt), float(tol), cv2.CMP_LE))
+            apn = cv2.absdiff(prev, nxt)
+            cand = cv2.bitwise_and(cand, cv2.compare(apn, float(tol), cv2.CMP_LE))
         rise = np.bitwise_and(rise, 1, out=rise).view(bool)
         fall = np.bitwise_and(fall, 1, out=fall).view(bool)
         cand = np.bitwise_and(cand, 1, out=cand).view(bool)
@@ -369,13 +405,21 @@ class Derainer:
             # Hysteresis: faint streaks and rims found whole.  A component that
             # merges a bright streak with its surroundings and fails Eq. (18)
             # keeps the streak accepted at c.
-            hyst = hysteresis_candidates(prev, cur, nxt, c=self.c, c_low=c_low, tol=tol, valid=valid, slack=slack)
+            hyst = hysteresis_candidates(prev, cur, nxt, c=self.c, c_low=c_low, tol=tol, valid=valid,
+                                         slack=None if slack is None else slack.astype(np.float32, copy=False))
             b_low, fits_low = photometric_filter(prev, cur, nxt, hyst, beta_max=self.beta_max,
                                                  noise_sigma=self.noise_sigma, min_pixels=self.min_pixels)
             b |= b_low
             n_streaks = max(n_streaks, int(np.count_nonzero(fits_low.accepted)))
         if not boundary:
             u.rise, u.fall = rise, fall
+            if v1 is not None or v2 is not None:
+                u.aligned = (prev, nxt)   # read again by the removal of this frame
+        if self.motion_window_px > 0:
+            k = self.motion_contrast
+            moving = local_motion_mask(prev, cur, nxt, c=k * self.c, tol=k * 3.0 * math.sqrt(2.0) * self.noise_sigma,
+                                       window_px=self.motion_window_px, min_px=self.motion_min_px, ends_diff=apn)
+            u.moving = moving if moving.any() else None
         u.warped = v1 is not None or v2 is not None
         u.b = b
         u.n_streaks = n_streaks
@@ -396,25 +440,134 @@ class Derainer:
             u.b = np.zeros(u.lum.shape, bool)
         out_frame = u.raw.copy()
         replaced = np.zeros(u.lum.shape, bool)
-        if top >= 2 and np.any(region):
+        work = region
+        if u.moving is not None:
+            # Sec. 5.2 changes the rain pixels of rain regions only: dense local
+            # scene motion inside a rain region is left alone
+            work = region & ~u.moving
+        detected = u.b
+        if top >= 2 and np.any(work):
             ids = [self._reflect(n + o, top) for o in range(-3, 4)]
             window = _StreamWindow(self, n, ids)
             tol = 3.0 * math.sqrt(2.0) * self.noise_sigma if self._tol_auto else self.tol
-            idx, vals = remove_window(window, u.b, region, c=self.c, runs=self.runs, tol=tol,
+            free: list = []
+            idx, vals = remove_window(window, u.b, work, c=self.c, runs=self.runs, tol=tol,
                                       grow_px=self.grow_px, beta_max=self.beta_max,
-                                      noise_sigma=self.noise_sigma, min_pixels=self.min_pixels)
+                                      noise_sigma=self.noise_sigma, min_pixels=self.min_pixels, free_out=free)
             if idx.size:
                 n_pix = replaced.size
                 out_frame.reshape(n_pix, -1)[idx] = self._to_uint8(vals).reshape(idx.size, -1)
                 replaced.ravel()[idx] = True
+            if self.runs:
+                # Sec. 5.2: pixels hit by drops in 2 or 3 consecutive frames show
+                # no one-frame spike (note 16) but are rain.  Like the removal,
+                # only inside rain regions and away from local scene motion:
+                # elsewhere camera noise, moving texture and ripples pass the
+                # run tests too.  The free-standing runs the removal found are
+                # shared; the relaxed test next to the streaks is added.
+                flat, _, _ = multi_frame_hits(window, u.b, c=self.c, where=work, tol=tol, beta_max=self.beta_max,
+                                              noise_sigma=self.noise_sigma, min_pixels=self.min_pixels,
+                                              near_px=self.near_px, free=free[0] if free else None)
+                if flat.size:
+                    detected = u.b.copy()
+                    detected.ravel()[flat] = True
         self.streak_log.append((u.inputs[0], u.n_streaks))
-        results = [DerainedFrame(index=i, frame=out_frame, rain=replaced, detected=u.b, region=region,
-                                 field=field, repeat=(r > 0)) for r, i in enumerate(u.inputs)]
+        results = [DerainedFrame(index=i, frame=out_frame, rain=replaced, detected=detected, region=region,
+                                 field=field, repeat=(r > 0), b=u.b) for r, i in enumerate(u.inputs)]
+        u.aligned = None
         # drop what is no longer needed (frames n-3 and older)
         old = n - self.LOOKAHEAD
         if old in self._units:
             del self._units[old]
         return results
+
+
+def registration_slack(image: np.ndarray, *, registration_px: float) -> np.ndarray:
+    """Intensity error of a registration error of ``registration_px`` pixels, (M, N) [gray levels].
+
+    ``registration_px`` times the gradient magnitude (3 x 3 Sobel).  An 8-bit
+    gray frame takes a fast integer path: the L1 norm |g_x| + |g_y| (at most
+    sqrt(2) above the magnitude, never below it), rounded to whole gray levels,
+    uint8.  Other frames give the float32 magnitude.
+
+    Parameters
+    ----------
+    image : (M, N) uint8 or float array
+        Frame n [gray levels].
+    registration_px : float
+        Registration error allowed [px].
+    """
+    import cv2
+
+    scale = 0.125 * float(registration_px)
+    if image.dtype == np.uint8:
+        dx, dy = cv2.spatialGradient(image)
+        return cv2.add(cv2.convertScaleAbs(dx, alpha=scale), cv2.convertScaleAbs(dy, alpha=scale))
+    img = np.asarray(image, np.float32)
+    gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3, scale=scale)
+    gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3, scale=scale)
+    return cv2.magnitude(gx, gy)
+
+
+def local_motion_mask(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, *, c: float, tol: float,
+                      window_px: int = 15, min_px: int = 30, ends_diff: np.ndarray | None = None) -> np.ndarray:
+    """Pixels near local scene motion in frame n: a moving object is not rain, (M, N) bool.
+
+    Rain changes a pixel for one frame (Sec. 4.3 [GargNayar2007]): a drop in
+    frame n-1 leaves I_n = I_{n+1}, a drop in frame n+1 leaves I_{n-1} = I_n,
+    and a drop in frame n leaves I_{n-1} = I_{n+1} (Eq. 19).  A moving edge or
+    texture sweeps a pixel through three different values instead:
+    ``|I_{n+1} - I_{n-1}| > tol`` with I_n more than ``c`` away from both.
+    A window of ``window_px`` x ``window_px`` pixels holding ``min_px`` such
+    pixels or more is local motion (the global motion is already compensated).
+
+    Parameters
+    ----------
+    prev, cur, nxt : (M, N) float32 arrays
+        Luminance of frames n-1, n, n+1 aligned to frame n [gray levels].
+    c : float
+        Least change from I_n to each neighbour [gray levels].
+    tol : float
+        Stationarity tolerance of the two neighbours [gray levels].
+    window_px : int
+        Side of the counting window [px].
+    min_px : int
+        Sweeping pixels that make a window moving [px].
+    ends_diff : (M, N) float32 array, optional
+        ``|I_{n+1} - I_{n-1}|`` when already computed.
+    """
+    import cv2
+
+    e = _sweeping(prev, cur, nxt, c=c, tol=tol, ends_diff=ends_diff)
+    w = int(window_px)
+    if w * w <= 257:   # counts of 255 fit in uint16: compare without leaving it
+        count = cv2.boxFilter(e, cv2.CV_16U, (w, w), normalize=False, borderType=cv2.BORDER_CONSTANT)
+        m = cv2.compare(count, 255 * int(min_px), cv2.CMP_GE)
+        return np.bitwise_and(m, 1, out=m).view(bool)
+    count = cv2.boxFilter(e, cv2.CV_32F, (w, w), normalize=False, borderType=cv2.BORDER_CONSTANT)
+    return count >= 255.0 * int(min_px) - 0.5
+
+
+def _sweeping(prev, cur, nxt, *, c, tol, ends_diff=None):
+    """0/255 uint8: |I_{n+1} - I_{n-1}| > tol and I_n more than c from both."""
+    import cv2
+
+    if ends_diff is None:
+        ends_diff = cv2.absdiff(prev, nxt)
+    ends = cv2.compare(ends_diff, float(tol), cv2.CMP_GT)
+    if cv2.countNonZero(ends) > ends.size // 16:    # much motion: whole-frame operations
+        near = cv2.min(cv2.absdiff(cur, prev), cv2.absdiff(cur, nxt))
+        return cv2.bitwise_and(ends, cv2.compare(near, float(c), cv2.CMP_GT))
+    # the ends differ at few pixels (a static scene): test I_n there only
+    flat = ends.reshape(-1)
+    idx = np.flatnonzero(np.bitwise_and(flat, 1).view(bool))
+    cn = np.take(np.asarray(cur).reshape(-1), idx)
+    pn = np.take(np.asarray(prev).reshape(-1), idx)
+    nn = np.take(np.asarray(nxt).reshape(-1), idx)
+    c32 = np.float32(c)
+    near = (np.abs(cn - pn) > c32) & (np.abs(cn - nn) > c32)
+    flat[idx[~near]] = 0
+    return ends
 
 
 def _shift_nearest(mask: np.ndarray, dx: float, dy: float) -> np.ndarray:
@@ -449,11 +602,25 @@ def _drop_isolated(mask: np.ndarray, min_pixels: int) -> np.ndarray:
     return mask & near.view(bool)
 
 
+#: Width of the coordinate maps handed to cv2.remap (which limits map sizes) [px].
+_MAP_WIDTH = 1024
+
+
+def _affine_map(M: np.ndarray, row: int, cols: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """Coordinate ``row`` (0: x, 1: y) of ``M (x, y, 1)`` for float32 maps of columns and rows."""
+    a, b, t = float(M[row, 0]), float(M[row, 1]), float(M[row, 2])
+    if a == 1.0 and b == 0.0:
+        return cols + np.float32(t)
+    if a == 0.0 and b == 1.0:
+        return rows + np.float32(t)
+    return np.float32(a) * cols + np.float32(b) * rows + np.float32(t)
+
+
 def _sample_bilinear(img: np.ndarray, M: np.ndarray, idx: np.ndarray) -> np.ndarray:
     """Values of ``img`` at ``M (x, y)`` for the flat pixels ``idx`` of the reference frame, (P, C)."""
     h, w = img.shape[:2]
     flat = img.reshape(h * w, -1)
-    if np.allclose(M[2], [0, 0, 1]) and np.allclose(M[:2, :2], np.eye(2)) and h > 1 and w > 1:
+    if is_translation(M) and h > 1 and w > 1:
         # a translation: one integer offset and one pair of weights for every pixel
         ix, iy = math.floor(M[0, 2]), math.floor(M[1, 2])
         fx, fy = np.float32(M[0, 2] - ix), np.float32(M[1, 2] - iy)
@@ -469,7 +636,7 @@ def _sample_bilinear(img: np.ndarray, M: np.ndarray, idx: np.ndarray) -> np.ndar
     cols = (idx % w).astype(np.float64)
     x = M[0, 0] * cols + M[0, 1] * rows + M[0, 2]
     y = M[1, 0] * cols + M[1, 1] * rows + M[1, 2]
-    if not np.allclose(M[2], [0, 0, 1]):
+    if not is_affine(M):
         z = M[2, 0] * cols + M[2, 1] * rows + M[2, 2]
         x, y = x / z, y / z
     x = np.clip(x, 0, w - 1)
@@ -489,6 +656,8 @@ class _StreamWindow:
     """Frames n-3 .. n+3 of a :class:`Derainer`, aligned to frame n lazily, pixel by pixel.
 
     Only the pixels the removal touches are resampled: no full-frame warps.
+    The luminance of frames n-1 and n+1 aligned to frame n, warped once for
+    the three-frame test, is read directly.
     """
 
     def __init__(self, d: "Derainer", n: int, ids: list[int]):
@@ -500,57 +669,115 @@ class _StreamWindow:
         self.centre_lin = u.lin
         self._M = [d._tracker.between(j, n) for j in ids]
         self._moved = [transform_magnitude_px(M, self.shape) >= WARP_MIN_SHIFT_PX for M in self._M]
+        # frames n-1 and n+1 as the three-frame test saw them (None: not warped or not those frames)
+        self._aligned = {}
+        self._coord_cache = None
+        self._runs_memo = None
+        if u.aligned is not None and ids[2] == n - 1 and ids[4] == n + 1:
+            self._aligned = {2: u.aligned[0], 4: u.aligned[1]}
 
     def _at(self, arr, k, idx):
         if not self._moved[k]:
-            return arr.reshape(arr.shape[0] * arr.shape[1], -1)[idx]
-        return _sample_bilinear(arr, self._M[k], idx)
+            if arr.ndim == 2:     # np.take on the flat frame: much cheaper than row indexing
+                return np.take(arr.reshape(-1), idx)[:, None]
+            return np.take(arr.reshape(arr.shape[0] * arr.shape[1], -1), idx, axis=0)
+        M = self._M[k]
+        if not is_affine(M):
+            return _sample_bilinear(arr, M, idx)
+        # bilinear resampling of the few pixels in C (cv2.remap), on the
+        # coordinates of ``idx`` computed once for all the frames of the window
+        cols, rows, pad = self._coords(idx)
+        mx = _affine_map(M, 0, cols, rows)
+        my = _affine_map(M, 1, cols, rows)
+        import cv2
+
+        out = cv2.remap(arr, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        ch = 1 if arr.ndim == 2 else arr.shape[2]
+        return out.reshape(-1, ch)[:idx.size]
+
+    def _coords(self, idx):
+        """Columns and rows of the flat pixels ``idx`` as (R, 1024) float32 maps (padded)."""
+        hit = self._coord_cache
+        if hit is not None and hit[0] is idx:
+            return hit[1]
+        w = self.shape[1]
+        P = idx.size
+        R = max(-(-P // _MAP_WIDTH), 1)
+        pad = R * _MAP_WIDTH - P
+        full = np.concatenate([idx, np.zeros(pad, idx.dtype)]) if pad else idx
+        rows, cols = np.divmod(full, w)
+        res = (cols.astype(np.float32).reshape(R, _MAP_WIDTH), rows.astype(np.float32).reshape(R, _MAP_WIDTH), pad)
+        self._coord_cache = (idx, res)
+        return res
 
     def lum_at(self, k: int, idx: np.ndarray) -> np.ndarray:
+        al = self._aligned.get(k)
+        if al is not None and self._moved[k]:
+            return np.take(al.reshape(-1), idx)
+        if not self._moved[k]:
+            return np.take(self.units[k].lum.reshape(-1), idx)
         return self._at(self.units[k].lum, k, idx)[:, 0]
 
     def lin_at(self, k: int, idx: np.ndarray) -> np.ndarray:
-        return self._at(self.units[k].lin, k, idx)
+        unit = self.units[k]
+        if unit.lin is unit.lum:          # a gray frame: its luminance
+            return self.lum_at(k, idx)[:, None]
+        return self._at(unit.lin, k, idx)
 
-    def run_candidates(self, c: float) -> np.ndarray:
+    def _carry(self, mask: np.ndarray, src: int, dst: int) -> np.ndarray:
+        """A mask of unit ``src`` in the coordinates of unit ``dst`` (nearest pixel, False outside)."""
         import cv2
 
+        if src == dst:
+            return mask
+        M = self.d._tracker.between(src, dst)
+        if transform_magnitude_px(M, self.shape) < WARP_MIN_SHIFT_PX:
+            return mask
+        if is_translation(M):
+            return _shift_nearest(mask, M[0, 2], M[1, 2])
+        h, w = self.shape
+        return cv2.warpAffine(mask.view(np.uint8), M[:2], (w, h),
+                              flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP).view(bool)
+
+    def centre_steps(self, c: float) -> np.ndarray | None:
+        """Frame n at least c above frame n-1 or n+1 (the one-sided tests of its Eq. (19)), or None."""
+        u = self.d._units[self.n]
+        if u.rise is None or u.fall is None:
+            return None
+        return u.rise | u.fall
+
+    def run_candidates(self, c: float) -> np.ndarray:
+        hit = self._runs_memo
+        if hit is not None and hit[0] == c:
+            return hit[1]
+        pre = self._run_candidates(c)
+        self._runs_memo = (c, pre)
+        return pre
+
+    def _run_candidates(self, c: float) -> np.ndarray:
         near = self.units[1:6]
         if self.ids[1:6] != list(range(self.n - 2, self.n + 3)) or any(
                 v.rise is None or v.fall is None for v in near):
             return np.zeros(self.shape, bool)   # the two ends of the stream: no runs
-        if not any(self._moved[1:6]) and not any(v.warped for v in near):
-            # a static camera: the run masks are those of absolute frame pairs,
-            # three of the five shared with the next frame's window
-            cache = self.d._run_cache
-            pre = np.zeros(self.shape, bool)
-            for a, e in RUNS:
-                key = (self.n + a, self.n + e)
-                m = cache.get(key)
-                if m is None:
-                    m = cache[key] = run_pair(near[a + 2].rise, near[e + 2].fall)
-                pre |= m
-            for key in [key for key in cache if key[0] < self.n - 1]:
-                del cache[key]
-            return pre
-        rises, falls = [], []
-        for k, v in zip(range(1, 6), near):
-            if not self._moved[k] and not v.warped:
-                rises.append(v.rise)
-                falls.append(v.fall)
-                continue
-            # carry the unit's own one-sided tests into frame n (nearest pixel)
-            h, w = self.shape
-            M = self._M[k]
-            translation = np.allclose(M[2], [0, 0, 1]) and np.allclose(M[:2, :2], np.eye(2))
-            for src, dst in ((v.rise, rises), (v.fall, falls)):
-                if translation:
-                    dst.append(_shift_nearest(src, M[0, 2], M[1, 2]))
-                    continue
-                m = cv2.warpAffine(src.view(np.uint8), M[:2], (w, h),
-                                   flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP)
-                dst.append(m.view(bool))
-        return run_prefilter(rises, falls)
+        # The run masks are those of absolute frame pairs [a, e], kept in the
+        # coordinates of frame a: three of the five are shared with the next
+        # frame's window, and only the result is carried into frame n.
+        cache = self.d._run_cache
+        by_start: dict[int, np.ndarray] = {}
+        for a, e in RUNS:
+            ja, je = self.n + a, self.n + e
+            m = cache.get((ja, je))
+            if m is None:
+                m = cache[(ja, je)] = run_pair(near[a + 2].rise, self._carry(near[e + 2].fall, je, ja))
+            acc = by_start.get(ja)
+            by_start[ja] = m.copy() if acc is None else np.bitwise_or(acc, m, out=acc)
+        pre = None
+        for ja, m in by_start.items():      # one carry per starting frame (copies of our own)
+            m = self._carry(m, ja, self.n)
+            pre = m if pre is None else np.bitwise_or(pre, m, out=pre)
+        for key in [key for key in cache if key[0] < self.n - 1]:
+            del cache[key]
+        return pre
 
 
 def derain_clip(frames: np.ndarray | Iterable[np.ndarray], profile=None, **kwargs) -> tuple[np.ndarray, np.ndarray]:
