@@ -300,3 +300,20 @@ def test_streak_table_does_not_depend_on_the_selection():
         mine = together["own_k"] == i
         np.testing.assert_array_equal(alone["own_y"], together["own_y"][mine])
         np.testing.assert_array_equal(alone["own_x"], together["own_x"][mine])
+
+
+def test_group_sums_equal_bincount_with_empty_groups():
+    """The table's per-streak sums (one segment reduction over pixels ordered by streak,
+    the segments found once and reused) equal np.bincount, also for streaks without pixels
+    at the start, middle and end."""
+    from raingauge.gauge.streaks import _Groups, _group_sum
+
+    rng = np.random.default_rng(4)
+    K = 12
+    k = np.sort(rng.choice([1, 2, 3, 5, 6, 7, 8, 10], size=400))
+    g = _Groups(k, K)
+    for _ in range(3):
+        v = rng.normal(0.0, 10.0, k.size)
+        np.testing.assert_allclose(g.sum(v), np.bincount(k, v, K), rtol=1e-12, atol=1e-9)
+        np.testing.assert_array_equal(_group_sum(k, v, K), g.sum(v))
+    np.testing.assert_array_equal(_Groups(np.zeros(0, np.int64), 3).sum(np.zeros(0)), np.zeros(3))

@@ -425,7 +425,9 @@ class RainGauge:
             flags.add("underexposed")
         # a drop changes a pixel by a fraction beta < 0.1 of its contrast: large changes between
         # the neighbouring frames n-1 and n+1 over many pixels are scene or camera motion
-        if float(np.mean(np.abs(neighbour_change) >= self._motion_dn)) > 0.005:
+        size = neighbour_change if neighbour_change.dtype.kind == "u" else np.abs(neighbour_change)
+        big = size >= self._motion_dn
+        if np.count_nonzero(big) / big.size > 0.005:
             flags.add("scene_motion")
         lap = cv2.Laplacian(cv2.GaussianBlur(cur[::2, ::2], (3, 3), 0), cv2.CV_32F)
         sharp = float(np.mean(np.abs(lap)))

@@ -1305,7 +1305,10 @@ def _refine_box_width(ks, o, v, cen, w0, K):
     key, uo, vo = key[order], uu[order], vv[order]
 
     def cums(x):
-        return np.concatenate(([0.0], np.cumsum(x)))
+        out = np.empty(x.size + 1)
+        out[0] = 0.0
+        np.cumsum(x, out=out[1:])
+        return out
 
     c_n, c_u, c_uu = np.arange(uo.size + 1, dtype=np.float64), cums(uo), cums(uo * uo)
     c_v, c_vu = cums(vo), cums(vo * uo)
@@ -1385,16 +1388,31 @@ def _group_sum(k, values, K: int) -> np.ndarray:
     """Per-group sums of ``values`` for group indices ``k`` given in ascending order:
     ``np.bincount(k, values, K)`` by one segment reduction (pairwise summation, several
     times faster than the scattered accumulation)."""
-    values = np.asarray(values)
-    out = np.zeros(K)
-    n = values.size
-    if n == 0 or K == 0:
+    return _Groups(k, K).sum(values)
+
+
+class _Groups:
+    """Per-group sums over one ascending array of group indices ``k`` (K groups), its segment
+    starts found once for all the sums taken over it (:func:`_group_sum`)."""
+
+    def __init__(self, k, K: int):
+        self.K = int(K)
+        self.n = np.asarray(k).size
+        if self.n and self.K:
+            starts = np.searchsorted(k, np.arange(self.K))
+            self.filled = starts < np.append(starts[1:], self.n)
+            # each non-empty group's segment runs to the next non-empty group's start (to
+            # the end for the last one, also when empty groups follow it)
+            self.first = starts[self.filled]
+
+    def sum(self, values) -> np.ndarray:
+        """``np.bincount(k, values, K)`` by one segment reduction."""
+        values = np.asarray(values)
+        out = np.zeros(self.K)
+        if values.size == 0 or self.K == 0:
+            return out
+        out[self.filled] = np.add.reduceat(values.astype(np.float64, copy=False), self.first)
         return out
-    starts = np.searchsorted(k, np.arange(K))
-    filled = starts < np.append(starts[1:], n)
-    sums = np.add.reduceat(values.astype(np.float64, copy=False), np.minimum(starts, n - 1))
-    out[filled] = sums[filled]
-    return out
 
 
 def _axis_moments(img, k, lx, ly, K, x0, y0, x_default, y_default):
@@ -1404,14 +1422,15 @@ def _axis_moments(img, k, lx, ly, K, x0, y0, x_default, y_default):
     defaults and slope 0."""
     fx, fy = lx.astype(np.float64), ly.astype(np.float64)
     wts = np.maximum(img, 0.0)
-    s0 = _group_sum(k, wts, K)
-    sx = _group_sum(k, wts * fx, K)
-    sy = _group_sum(k, wts * fy, K)
+    g = _Groups(k, K)
+    s0 = g.sum(wts)
+    sx = g.sum(wts * fx)
+    sy = g.sum(wts * fy)
     safe = np.where(s0 > 0, s0, 1.0)
     xm_l, ym_l = sx / safe, sy / safe
     dy = fy - ym_l[k]
-    myy = _group_sum(k, wts * dy * dy, K) / safe
-    mxy = _group_sum(k, wts * (fx - xm_l[k]) * dy, K) / safe
+    myy = g.sum(wts * dy * dy) / safe
+    mxy = g.sum(wts * (fx - xm_l[k]) * dy) / safe
     slope = np.where(myy > 1e-9, mxy / np.where(myy > 1e-9, myy, 1.0), 0.0)
     xm = np.where(s0 > 0, xm_l + x0, x_default)
     ym = np.where(s0 > 0, ym_l + y0, y_default)
@@ -1419,7 +1438,7 @@ def _axis_moments(img, k, lx, ly, K, x0, y0, x_default, y_default):
     return xm, ym, slope
 
 
-def _cross_width(ks, o, img_s, row_width, K, sigma_min):
+def _cross_width(ks, o, img_s, row_width, K, sigma_min, groups=None):
     """Apparent width w' of K streaks from their change ``img_s`` at offsets ``o`` across
     the axis [px] (streak ``ks``); ``row_width`` the detected width across [px].
 
@@ -1428,16 +1447,18 @@ def _cross_width(ks, o, img_s, row_width, K, sigma_min):
     sharp or uniformly defocused streak end within 1 px of w'/2), w' = sqrt(12 (var -
     1/12 - s_min^2)); then refined by least squares (:func:`_refine_box_width`: the moment
     is noisy on faint streaks, it weighs the far pixels' noise by their squared offset).
+    ``groups`` the :class:`_Groups` of ``ks`` when already made.
     Returns (centre [px], w' [px], total change c0)."""
+    g = _Groups(ks, K) if groups is None else groups
     win = np.full(K, np.inf)
     cen_o = np.zeros(K)
     for i in range(3):
         # the first pass takes the whole band (an infinite window)
         v = img_s if i == 0 else np.where(np.abs(o - cen_o[ks]) <= win[ks], img_s, 0.0)
         vo = v * o
-        c0 = _group_sum(ks, v, K)
-        c1 = _group_sum(ks, vo, K)
-        c2 = _group_sum(ks, vo * o, K)
+        c0 = g.sum(v)
+        c1 = g.sum(vo)
+        c2 = g.sum(vo * o)
         with np.errstate(all="ignore"):
             cen = c1 / c0
             var = c2 / c0 - cen ** 2
@@ -1558,7 +1579,7 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     gxb = np.repeat(bx0, n_b) + (np.arange(rb.size) - np.repeat(np.cumsum(n_b) - n_b, n_b))
     kb = row_k[rb]
     gyb_i = row_y[rb]
-    ob = gxb - (xm[kb] + slope[kb] * (gyb_i - ym[kb]))
+    ob = gxb - axis_x[rb]
     flat_b = gyb_i * N + gxb
     lab_b = np.take(labels, flat_b)
     ib = np.flatnonzero((np.abs(ob) <= half[kb]) & ~((lab_b != 0) & (lab_b != L[kb]) & valid[lab_b]))
@@ -1602,7 +1623,8 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     ks, img_s = kb[js], img_b[js]
     o = ob[js] * cos_t[ks]
     n_cross = np.bincount(ks, minlength=K)
-    cen, w_app, c0 = _cross_width(ks, o, img_s, row_width * cos_t, K, sigma_min)
+    g_s = _Groups(ks, K)
+    cen, w_app, c0 = _cross_width(ks, o, img_s, row_width * cos_t, K, sigma_min, groups=g_s)
     ok = has & (c0 > 0) & (n_cross >= 6) & np.isfinite(w_app) & (w_app > 0)
     # goodness of the uniform model: the change on the plateau rows against a box of width
     # w' (pixel-integrated) holding the same total, per pixel in units of the noise
@@ -1613,7 +1635,7 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
         u = o - cen[ks]
         cover = np.clip(np.minimum(u + 0.5, hw) - np.maximum(u - 0.5, -hw), 0.0, None)
         res = img_s - amp[ks] * cover
-        chi2 = _group_sum(ks, res * res, K) / (np.maximum(n_cross, 1) * max(noise_sigma, 1e-3) ** 2)
+        chi2 = g_s.sum(res * res) / (np.maximum(n_cross, 1) * max(noise_sigma, 1e-3) ** 2)
     chi2 = np.where(ok & np.isfinite(chi2), chi2, np.inf)
     cap = cap_offset_px(np.where(np.isfinite(w_app), w_app, 1.0))
     top = top_r + cap
@@ -1626,15 +1648,16 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     if cur is not None:
         c_own = cur_o
         n_own = np.bincount(ok_k, minlength=K)
+        g_o = _Groups(ok_k, K)
         with np.errstate(all="ignore"):
-            bg_dn = _group_sum(ok_k, c_own - raw_o, K) / n_own
+            bg_dn = g_o.sum(c_own - raw_o) / n_own
         if prev is not None:
             b = np.take(prev, flat_o).astype(np.float64)
             d = c_own - b
-            sb = _group_sum(ok_k, b, K)
-            sbb = _group_sum(ok_k, b * b, K)
-            sd = _group_sum(ok_k, d, K)
-            sbd = _group_sum(ok_k, b * d, K)
+            sb = g_o.sum(b)
+            sbb = g_o.sum(b * b)
+            sd = g_o.sum(d)
+            sbd = g_o.sum(b * d)
             with np.errstate(all="ignore"):
                 n = np.maximum(n_own, 1)
                 vb = sbb / n - (sb / n) ** 2
