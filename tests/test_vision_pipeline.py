@@ -202,6 +202,35 @@ def test_local_motion_mask_finds_moving_texture_not_rain():
     assert not local_motion_mask(*still, c=6.0, tol=6.0, window_px=15, min_px=30).any()
 
 
+def test_local_motion_mask_sparse_path_counts_like_the_whole_frame_box_filter():
+    """Sparse sweeping pixels (a static scene) take the block path: same mask as the direct count."""
+    import cv2
+
+    from raingauge.vision.pipeline import _sweeping, local_motion_mask
+
+    rng = np.random.default_rng(3)
+    for trial in range(30):
+        H, W = int(rng.integers(48, 96)), int(rng.integers(48, 96))
+        w, min_px = int(rng.choice([5, 8, 15])), int(rng.integers(2, 12))
+        prev = np.full((H, W), 100.0, np.float32) + rng.normal(0, 0.5, (H, W)).astype(np.float32)
+        nxt = prev + rng.normal(0, 0.5, (H, W)).astype(np.float32)
+        cur = prev + rng.normal(0, 0.5, (H, W)).astype(np.float32)
+        # a few small clusters of pixels swept through three values, edges and corners included
+        for _ in range(int(rng.integers(1, 4))):
+            y, x = int(rng.integers(0, H)), int(rng.integers(0, W))
+            ys = np.clip(y + rng.integers(-3, 4, 12), 0, H - 1)
+            xs = np.clip(x + rng.integers(-3, 4, 12), 0, W - 1)
+            nxt[ys, xs] += 30.0
+            cur[ys, xs] += 60.0
+        e, where = _sweeping(prev, cur, nxt, c=6.0, tol=6.0)
+        assert where is not None                      # the sparse path was taken
+        count = cv2.boxFilter((e > 0).astype(np.float32), cv2.CV_32F, (w, w), normalize=False,
+                              borderType=cv2.BORDER_CONSTANT)
+        expected = count >= min_px - 0.5
+        got = local_motion_mask(prev, cur, nxt, c=6.0, tol=6.0, window_px=w, min_px=min_px)
+        assert np.array_equal(got, expected), trial
+
+
 def test_moving_objects_in_rain_are_left_alone():
     render_clip, small_profile = _simulator()
     import cv2

@@ -126,11 +126,10 @@ def rain_pixel_energies(b: np.ndarray, *, masks: np.ndarray, max_pixels: int | N
         return rows, cols, np.zeros((0, K), np.float32), weight
     padded = cv2.copyMakeBorder(b.view(np.uint8) if b.dtype == np.bool_ else b.astype(np.uint8),
                                 h, h, h, h, cv2.BORDER_CONSTANT, value=0)
-    pw = cols_n + 2 * h
-    base = rows * pw + cols  # (r + h - h, c + h - h): top-left of the window in padded coords
-    dy, dx = np.mgrid[0:l, 0:l]
-    offs = (dy * pw + dx).ravel()
-    neigh = padded.ravel()[base[:, None] + offs[None, :]].astype(np.float32)  # (P, l*l)
+    # the l x l window of each pixel (top-left (r, c) in padded coordinates),
+    # gathered as whole rows of a strided view: no (P, l*l) index array
+    windows = np.lib.stride_tricks.sliding_window_view(padded, (l, l))
+    neigh = windows[rows, cols].reshape(rows.size, l * l).astype(np.float32)  # (P, l*l)
     mk = np.ascontiguousarray(masks.reshape(K, -1).T)
     # Blocks of _GEMM_ROWS rows: a product this small is fastest on one thread,
     # and a multithreaded BLAS (OpenBLAS threads larger ones) only contends

@@ -538,8 +538,15 @@ def local_motion_mask(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, *, c: 
     """
     import cv2
 
-    e = _sweeping(prev, cur, nxt, c=c, tol=tol, ends_diff=ends_diff)
+    e, where = _sweeping(prev, cur, nxt, c=c, tol=tol, ends_diff=ends_diff)
+    n_e = where.size if where is not None else cv2.countNonZero(e)
+    if n_e < int(min_px):   # no window can hold min_px sweeping pixels
+        return np.zeros(e.shape, bool)
     w = int(window_px)
+    if w * w <= 257 and where is not None:
+        sparse = _window_count_sparse(e, where, window_px=w, min_px=int(min_px))
+        if sparse is not None:
+            return sparse
     if w * w <= 257:   # counts of 255 fit in uint16: compare without leaving it
         count = cv2.boxFilter(e, cv2.CV_16U, (w, w), normalize=False, borderType=cv2.BORDER_CONSTANT)
         m = cv2.compare(count, 255 * int(min_px), cv2.CMP_GE)
@@ -548,8 +555,51 @@ def local_motion_mask(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, *, c: 
     return count >= 255.0 * int(min_px) - 0.5
 
 
+def _window_count_sparse(e, where, *, window_px, min_px, max_blocks=256):
+    """``local_motion_mask``'s window count on a sparse ``e``, block by block; None when too dense.
+
+    The output pixels are split into blocks of ``window_px`` x ``window_px``;
+    the window of every pixel of a block lies within the 2 x 2 cells of a
+    grid shifted by half a window, so a block whose 2 x 2 cells hold fewer
+    than ``min_px`` sweeping pixels has no moving pixel.  The others get the
+    exact count of the whole-frame box filter, on a patch one half-window
+    larger than the block (the frame's edges are the zero border).
+
+    Parameters
+    ----------
+    e : (M, N) uint8 array
+        0 / 255 sweeping pixels.
+    where : (P,) int array
+        Flat indices of the non-zero pixels of ``e``.
+    """
+    import cv2
+
+    H, W = e.shape
+    w = int(window_px)
+    h = w // 2
+    gh, gw = (H + 2 * h) // w + 2, (W + 2 * h) // w + 2
+    ys, xs = np.divmod(where, W)
+    cells = np.bincount(((ys + h) // w) * gw + (xs + h) // w, minlength=gh * gw).reshape(gh, gw)
+    pairs = cells[:-1, :-1] + cells[1:, :-1] + cells[:-1, 1:] + cells[1:, 1:]
+    hot = np.argwhere(pairs >= min_px)
+    if hot.shape[0] > max_blocks:
+        return None
+    out = np.zeros((H, W), np.uint8)
+    for gi, gj in hot.tolist():
+        r0, c0 = gi * w, gj * w
+        if r0 >= H or c0 >= W:
+            continue
+        r1, c1 = min(r0 + w, H), min(c0 + w, W)
+        pr0, pc0 = max(r0 - h, 0), max(c0 - h, 0)
+        patch = e[pr0:min(r1 + h, H), pc0:min(c1 + h, W)]
+        count = cv2.boxFilter(patch, cv2.CV_16U, (w, w), normalize=False, borderType=cv2.BORDER_CONSTANT)
+        out[r0:r1, c0:c1] = count[r0 - pr0:r1 - pr0, c0 - pc0:c1 - pc0] >= 255 * min_px
+    return out.view(bool)
+
+
 def _sweeping(prev, cur, nxt, *, c, tol, ends_diff=None):
-    """0/255 uint8: |I_{n+1} - I_{n-1}| > tol and I_n more than c from both."""
+    """0/255 uint8: |I_{n+1} - I_{n-1}| > tol and I_n more than c from both; and the flat
+    indices of its pixels when they came cheaply (None otherwise)."""
     import cv2
 
     if ends_diff is None:
@@ -557,7 +607,7 @@ def _sweeping(prev, cur, nxt, *, c, tol, ends_diff=None):
     ends = cv2.compare(ends_diff, float(tol), cv2.CMP_GT)
     if cv2.countNonZero(ends) > ends.size // 16:    # much motion: whole-frame operations
         near = cv2.min(cv2.absdiff(cur, prev), cv2.absdiff(cur, nxt))
-        return cv2.bitwise_and(ends, cv2.compare(near, float(c), cv2.CMP_GT))
+        return cv2.bitwise_and(ends, cv2.compare(near, float(c), cv2.CMP_GT)), None
     # the ends differ at few pixels (a static scene): test I_n there only
     flat = ends.reshape(-1)
     idx = np.flatnonzero(np.bitwise_and(flat, 1).view(bool))
@@ -567,7 +617,7 @@ def _sweeping(prev, cur, nxt, *, c, tol, ends_diff=None):
     c32 = np.float32(c)
     near = (np.abs(cn - pn) > c32) & (np.abs(cn - nn) > c32)
     flat[idx[~near]] = 0
-    return ends
+    return ends, idx[near]
 
 
 def _shift_nearest(mask: np.ndarray, dx: float, dy: float) -> np.ndarray:

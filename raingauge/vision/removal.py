@@ -84,10 +84,12 @@ def run_pair(rise: np.ndarray, fall: np.ndarray) -> np.ndarray:
     """
     import cv2
 
-    run = rise & fall
-    count = cv2.boxFilter(run.view(np.uint8), cv2.CV_16U, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
-    run &= count >= 3
-    return run
+    # 0/1 uint8 throughout (bool views); a 3 x 3 count is at most 9, so it fits in uint8
+    run = cv2.bitwise_and(rise.view(np.uint8), fall.view(np.uint8))
+    count = cv2.boxFilter(run, cv2.CV_8U, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+    ok = cv2.compare(count, 3, cv2.CMP_GE)
+    run = cv2.bitwise_and(run, ok)
+    return run.view(bool)
 
 
 def find_runs(lum, *, c: float, where: np.ndarray | None = None, tol: float | None = None
