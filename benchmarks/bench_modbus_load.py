@@ -11,7 +11,7 @@ both sides alike.  Printed: requests sent and failed, latency percentiles,
 frames/s in quiet and loaded slices (median and per slice) and the drop.
 Targets (issue 6): no failed request; frame-rate drop <= 10 %.
 
-    /work/venv/bin/python benchmarks/bench_modbus_load.py [--seconds 60] [--slice 10] [--clients 50] [--hz 10] [--size 1280x720]
+    python benchmarks/bench_modbus_load.py [--seconds 60] [--slice 10] [--clients 50] [--hz 10] [--size 1280x720]
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ thinned frames (every 2nd, 3rd) and with runs of consecutive frames between
 gaps (what dropping the backlog gives); printed: rate, drops counted and the
 ratio to the all-frames rate (counting noise about +-10 %).
 
-    /work/venv/bin/python benchmarks/bench_run_rate.py [--frames 150] [--seconds 20] [--size 1280x720] [--gaps]
+    python benchmarks/bench_run_rate.py [--frames 150] [--seconds 20] [--size 1280x720] [--gaps]
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ oscillating-drop streaks (``closeup=True``, off by default); they run on
 ``--closeup-frames`` frames (default 30) and report how many drops per frame
 were drawn so, and the cost against the same frames with ``closeup`` off.
 
-    /work/venv/bin/python benchmarks/bench_simulator.py [--frames 150] [--rate 10] [--camera gauge-default]
+    python benchmarks/bench_simulator.py [--frames 150] [--rate 10] [--camera gauge-default]
 """
 
 from __future__ import annotations

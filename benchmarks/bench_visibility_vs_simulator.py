@@ -32,8 +32,8 @@ between neighbouring pixels).
 It also compares the *ratios* to a base setting (the advisor's reduction
 factors), in which the constant cancels.
 
-    /work/venv/bin/python benchmarks/bench_visibility_vs_simulator.py            # one-at-a-time sweeps (9 settings)
-    /work/venv/bin/python benchmarks/bench_visibility_vs_simulator.py --full     # all 45 settings
+    python benchmarks/bench_visibility_vs_simulator.py            # one-at-a-time sweeps (9 settings)
+    python benchmarks/bench_visibility_vs_simulator.py --full     # all 45 settings
 
 Slow shutter: T = 66 and 125 ms exceed the 1/30 s frame interval; the clip is
 rendered at 1/T frames per second, as a camcorder's slow shutter does.

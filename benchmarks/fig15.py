@@ -5,7 +5,7 @@ Caption settings: (a) T = 8-125 ms, f = 3155 px, N = 5.6, z0 = 10 m;
 f = 8000 px, T = 16 ms, N = 6.7; pixel pitch of the Canon XL1 profile
 (6.7 um), single drop radius a_ref = 0.5 mm, rain-visible limit R = 3.
 
-    /work/venv/bin/python benchmarks/fig15.py OUT_DIR
+    python benchmarks/fig15.py OUT_DIR
 
 Prints the shape checks the paper describes: (a) sigma_r sqrt(T) constant,
 (b) the slope in N at the end as a fraction of the slope at the start,
