@@ -127,9 +127,9 @@ def test_volume_against_simulator_drops():
         beta, _ = render_streaks(CAM.shape, caps["p0"], caps["p1"], caps["radius_px"], caps["area_px"])
         frames = [bg + rng.normal(0, 1.0, bg.shape) for _ in range(3)]
         frames[1] = compose_rain(frames[1], beta)
-        g = RainGauge(CAM, velocity_model="gunn_kinzer", window_s=1.0, step_s=1.0, keep_drops=True)
-        # seed the drop-brightness estimate with a sharp drop first
-        g._brightness.extend([200.0] * 10)
+        # the drop brightness is known (the simulator's)
+        g = RainGauge(CAM, velocity_model="gunn_kinzer", window_s=1.0, step_s=1.0, keep_drops=True,
+                      drop_brightness_dn=200.0)
         for fr in frames:
             g.process(np.clip(np.rint(fr), 0, 255).astype(np.uint8))
         g.flush()
@@ -156,8 +156,8 @@ def _round_trip(profile, diameter_m, *, n_frames, background_dn, drop_brightness
     half = 0.5 * (on[-1] - on[0])
     lo, hi = on[0] - 0.3 * half, on[-1] + 0.3 * half
     M, N = profile.shape
-    gauge = RainGauge(profile, velocity_model="gunn_kinzer", window_s=1e3, step_s=1e3, keep_drops=True)
-    gauge._brightness.extend([drop_brightness_dn] * 40)       # the drop brightness, as if measured
+    gauge = RainGauge(profile, velocity_model="gunn_kinzer", window_s=1e3, step_s=1e3, keep_drops=True,
+                      drop_brightness_dn=drop_brightness_dn)    # the drop brightness, as if calibrated
     bg = np.full(profile.shape, background_dn, np.float32)
     n = cols * rows
     k = 0
@@ -290,3 +290,23 @@ def test_noisier_frames_sample_small_drops_less(volume):
     noisy = volume.kappa(a, noise_dn=3.0 * base)
     assert noisy[0] < 0.5 * quiet[0]
     assert noisy[1] > 0.7 * quiet[1]
+
+
+def test_brightness_reference_from_the_model(volume):
+    """The model's reference for the E_r estimate: the focus test's share of law-abiding
+    streaks (p <= p_law), q = (2 a_i / w')^2 with its error, and the percentile fixed point
+    of the measured q', near 1 (in focus, lifted by the errors, lowered by the defocused
+    drops the velocity law keeps)."""
+    z = np.linspace(2.3, 2.7, 41)
+    res = pass_probability(0.8e-3, z, CAM, velocity_model="gunn_kinzer", contrast_dn=160.0)
+    assert np.all(res["p"] <= res["p_law"] + 1e-12)
+    a_img = CAM.focal_length_px * 0.8e-3 / z
+    w_app = 2 * res["apparent_radius_m"] * CAM.focal_length_px / CAM.focus_distance_m
+    assert res["q"] == pytest.approx((2 * a_img / w_app) ** 2, rel=1e-9)
+    assert np.all(res["q_sigma"] > 0)
+    assert 0.8 < volume.brightness_q < 1.1
+    assert volume.brightness_q_by_noise.shape == volume.noises_dn.shape
+    assert volume.brightness_q_at(None) == volume.brightness_q
+    mid = 0.5 * (volume.noises_dn[1] + volume.noises_dn[2])
+    assert volume.brightness_q_at(mid) == pytest.approx(0.5 * (volume.brightness_q_by_noise[1]
+                                                              + volume.brightness_q_by_noise[2]))

@@ -86,6 +86,7 @@ from raingauge.gauge.streaks import (
     spike_image,
 )
 from raingauge.gauge.volume import (
+    BRIGHTNESS_PERCENTILE,
     DEFOCUS_MODELS,
     EDGE_MARGIN_PX,
     SampleVolume,
@@ -103,6 +104,10 @@ NOMINAL_DROP_BRIGHTNESS_DN = 200.0
 #: Law-abiding streaks needed before the drop brightness E_r is trusted; frames are
 #: kept back (at most until the next record) until then.
 MATURE_BRIGHTNESS_SAMPLES = 30
+
+#: Brightness samples kept for the drop brightness E_r (the latest; in heavy rain most are
+#: pieces of defocused drops, and the estimate needs ~100 focused ones) [-].
+BRIGHTNESS_SAMPLES = 2000
 
 #: Per-pixel signal to noise of a streak's change below which its width and ends scatter
 #: beyond the velocity law's tolerance (dark scenes: drops read ~2.3 and are counted;
@@ -209,6 +214,65 @@ def merge_probability(width_px, height_px, other_widths_px, other_heights_px, sh
     return np.minimum(1.0 - np.exp(-np.maximum(total, 0.0) / float(M * N)), 0.8)
 
 
+def drop_brightness_dn(samples_dn, background_dn, *, q_min: float = 0.6, q_ref: float = 1.0,
+                       percentile: float = 75.0, iterations: int = 50) -> float:
+    """The drop brightness E_r from the streaks that pass the velocity law [gray levels].
+
+    Each law-abiding streak gives E_b + 4 Q / (pi w'^2) = E_b + q' (E_r - E_b)
+    (:func:`raingauge.gauge.rejection.photometric_focus`): the drop's contrast times
+    its measured photometric focus q' (q <= 1, plus its error).  In heavy rain many
+    law-abiding detections are pieces of defocused drops with q' near 0, and their share
+    moves any fixed percentile of all samples; so the contrasts d = q' (E_r - E_b) are
+    taken above the focus test's cut, by the fixed point
+
+        D = P{ d : d >= q_min D },
+
+    (the percentile P of the samples the test would keep; iterated from the percentile
+    of all of them, the map contracts: raising D drops faint samples whose percentile
+    stays below it), and E_r - E_b = D / q_ref with q_ref the same fixed point of the
+    model's distribution of q' (:attr:`raingauge.gauge.volume.SampleVolume.brightness_q`:
+    the errors of q' lift the percentile above the in-focus q = 1).
+
+    Parameters
+    ----------
+    samples_dn : (n,) array_like
+        E_b + 4 Q / (pi w'^2) of each streak [gray levels].
+    background_dn : (n,) array_like
+        E_b behind each streak [gray levels].
+    q_min : float
+        Photometric focus of the defocus test [-].
+    q_ref : float
+        The model's fixed point of the percentile, as a fraction of E_r - E_b [-].
+    percentile : float
+        Percentile P [%].
+    iterations : int
+        Most fixed-point steps.
+
+    Returns
+    -------
+    float
+        E_r [gray levels] (median E_b plus the contrast); NaN without samples.
+    """
+    x = np.asarray(samples_dn, dtype=np.float64).ravel()
+    b = np.asarray(background_dn, dtype=np.float64).ravel()
+    ok = np.isfinite(x) & np.isfinite(b)
+    x, b = x[ok], b[ok]
+    if x.size == 0:
+        return float("nan")
+    d = x - b
+    e = float(np.percentile(d, percentile))
+    for _ in range(int(iterations)):
+        keep = d >= q_min * e
+        if not keep.any():
+            break
+        e_new = float(np.percentile(d[keep], percentile))
+        if abs(e_new - e) <= 1e-4 * max(abs(e), 1.0):
+            e = e_new
+            break
+        e = e_new
+    return float(np.median(b)) + e / float(q_ref)
+
+
 class RainGauge:
     """A camera rain gauge on a stream of frames.
 
@@ -245,13 +309,17 @@ class RainGauge:
         touched another one in the same frame (merged streaks are not measured).
     volume : SampleVolume, optional
         A precomputed sample volume for this profile and these options.
+    drop_brightness_dn : float, optional
+        The drop brightness E_r [gray levels] when it is known (a calibrated scene);
+        default: estimated from the streaks as they come (:func:`drop_brightness_dn`).
     """
 
     def __init__(self, profile, *, window_s: float = 60.0, step_s: float = 10.0,
                  velocity_model: str = "gunn_kinzer", clock_start_s: float = 0.0,
                  detection_threshold_dn: float | None = None, smooth_px: int = 5, min_drops: int = 20,
                  keep_drops: bool = False, defocus_model: str = "uniform",
-                 overlap_correction: bool = True, volume: SampleVolume | None = None):
+                 overlap_correction: bool = True, volume: SampleVolume | None = None,
+                 drop_brightness_dn: float | None = None):
         from raingauge.physics.drops import FALL_VELOCITY_MODELS
 
         if velocity_model not in FALL_VELOCITY_MODELS:
@@ -279,6 +347,9 @@ class RainGauge:
         self._shape = "uniform" if defocus_model == "uniform" else "chord"
         self.volume = volume if volume is not None else _sample_volume(profile, velocity_model, defocus_model)
         self.keep_drops = keep_drops
+        if drop_brightness_dn is not None and not (math.isfinite(drop_brightness_dn) and drop_brightness_dn > 0):
+            raise ValueError(f"drop_brightness_dn must be a positive number of gray levels, got {drop_brightness_dn!r}")
+        self.fixed_drop_brightness_dn = None if drop_brightness_dn is None else float(drop_brightness_dn)
         self.drops: list[dict] = []
         self._frame_interval = profile.frame_interval_s
         self._buffer: deque = deque(maxlen=3)          # (t, linear frame, frame index)
@@ -295,8 +366,9 @@ class RainGauge:
         self._t_decided = None                          # time of the last frame whose drops were counted
         self._prev_counted: list = []                   # the drops of that frame
         self._gaps: deque = deque()                     # (t_before, t_after) of gaps in the frame times
+        self._noise_log: deque = deque(maxlen=300)      # noise of the recent frames [gray levels]
         self._sharpness: deque = deque(maxlen=int(max(10 * profile.frame_rate_hz, 10)))
-        self._brightness: deque = deque(maxlen=400)     # E_r estimates of law-abiding streaks
+        self._brightness: deque = deque(maxlen=BRIGHTNESS_SAMPLES)    # (E_b, E_r estimate) of law-abiding streaks
         #: why measured streaks were not counted (diagnostics)
         self.rejections: Counter = Counter()
         self._dilated = None
@@ -414,7 +486,7 @@ class RainGauge:
         flags = set()
         sub = raw[::4, ::4]
         self._last_mean_bg = float(np.mean(cur[::4, ::4]))
-        e_r = (float(np.percentile(np.asarray(self._brightness), 90)) if len(self._brightness) >= 10
+        e_r = (self._drop_brightness() if self._brightness_known(10)
                else NOMINAL_DROP_BRIGHTNESS_DN)
         # a focused streak changes a pixel by ~5 % of the drop's contrast (beta ~ pi w / 4 L)
         if e_r - self._last_mean_bg < 30.0 * self.c:
@@ -460,6 +532,7 @@ class RainGauge:
         # the noise streaks are measured in: the sensor's and the flicker of rain too faint to
         # detect (Eq. 27); it sets each streak's errors and the frame's sample volume
         self._frame_noise_change = max(change_noise_dn(prev, cur, nxt), self.noise_change)
+        self._noise_log.append(self._frame_noise_change / math.sqrt(1.5))
         slope = float(np.median(self._slopes)) if len(self._slopes) >= 5 else 0.0
         labels, stats = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope)
         rejected = 0
@@ -467,10 +540,10 @@ class RainGauge:
         if np.any(stats[1:, 4] > 0):
             ref_bg = None
             contrast = None
-            if self.defocus_model == "uniform" and len(self._brightness) >= 10:
+            if self.defocus_model == "uniform" and self._brightness_known(10):
                 # Eq. (18): a streak changes a pixel by beta (E_r - I_b); dividing by the local
                 # contrast removes the background's texture from the streak's profile
-                e_r = float(np.percentile(np.asarray(self._brightness), 90))
+                e_r = self._drop_brightness()
                 if u8:
                     # the same median from the histogram of the 8-bit sums I_{n-1} + I_{n+1}
                     hist = np.bincount((raws[0][::4, ::4].astype(np.uint16) + raws[2][::4, ::4]).ravel(),
@@ -502,16 +575,16 @@ class RainGauge:
         self._frames.append(entry)
         self._pending.append((entry, prepared))
         self._last_t = t
-        if self.defocus_model != "uniform" or len(self._brightness) >= MATURE_BRIGHTNESS_SAMPLES:
+        if self.defocus_model != "uniform" or self._brightness_known(MATURE_BRIGHTNESS_SAMPLES):
             self._resolve_pending()
 
     def _resolve_pending(self) -> None:
         """Decide the frames kept back until the drop brightness E_r was known well enough."""
         if not self._pending:
             return
-        if self.defocus_model == "uniform" and len(self._brightness) >= 10:
+        if self.defocus_model == "uniform" and self._brightness_known(10):
             # the drop brightness E_r: the sharpest of the law-abiding streaks (defocus only dims)
-            e_r = float(np.percentile(np.asarray(self._brightness), 90))
+            e_r = self._drop_brightness()
         else:
             e_r = float("nan")
         for entry, prepared in self._pending:
@@ -628,7 +701,7 @@ class RainGauge:
         total = exposure_area_px2(plat[idx], mot[idx], w_app[idx])
         focused = 4.0 * total / (math.pi * w_app[idx] ** 2)
         bright = np.isfinite(ib) & (w_app[idx] >= 2.5)
-        self._brightness.extend((ib + focused)[bright].tolist())
+        self._brightness.extend(zip(ib[bright].tolist(), (ib + focused)[bright].tolist()))
         p_over = (self._overlap_probabilities(labels, valid, tab, idx, stats=stats) if self.overlap_correction
                   else np.zeros(idx.size))
         prepared = []
@@ -728,7 +801,7 @@ class RainGauge:
             total = float(exposure_area_px2(plat, mot, w_app))
             focused_contrast = 4.0 * total / (math.pi * w_app * w_app)
             if np.isfinite(ib) and w_app >= 2.5:
-                self._brightness.append(ib + focused_contrast)
+                self._brightness.append((float(ib), float(ib + focused_contrast)))
             cands.append((sp, w_app, mot, dx, xc, yc, (ib, total)))
         prepared = []
         for sp, w_app, mot, dx, xc, yc, photo in cands:
@@ -801,6 +874,36 @@ class RainGauge:
             self._slopes.append(c["slope"])
             counted.append(d)
         return counted, rejected
+
+    @property
+    def drop_brightness_estimate_dn(self) -> float:
+        """The drop brightness E_r the gauge works with now [gray levels]: the given one,
+        else the estimate from the streaks so far (:func:`drop_brightness_dn`); NaN before
+        10 law-abiding streaks were measured."""
+        return self._drop_brightness() if self._brightness_known(10) else float("nan")
+
+    def _brightness_known(self, n_samples: int) -> bool:
+        """Whether E_r is given or has at least ``n_samples`` brightness samples behind it."""
+        return self.fixed_drop_brightness_dn is not None or len(self._brightness) >= n_samples
+
+    def _brightness_q(self) -> float:
+        """The sample volume's :attr:`~raingauge.gauge.volume.SampleVolume.brightness_q` at
+        the median noise of the recent frames [-]."""
+        vol = self.volume
+        if not hasattr(vol, "brightness_q_at"):
+            return 1.0
+        noise = float(np.median(self._noise_log)) if self._noise_log else None
+        return vol.brightness_q_at(noise)
+
+    def _drop_brightness(self) -> float:
+        """The drop brightness E_r [gray levels] from the law-abiding streaks' samples
+        (:func:`drop_brightness_dn`)."""
+        if self.fixed_drop_brightness_dn is not None:
+            return self.fixed_drop_brightness_dn
+        pairs = np.asarray(self._brightness, dtype=np.float64).reshape(-1, 2)
+        return drop_brightness_dn(pairs[:, 1], pairs[:, 0], q_min=self.volume.q_min,
+                                  q_ref=self._brightness_q(),
+                                  percentile=BRIGHTNESS_PERCENTILE)
 
     def _half_gap(self, steps: float) -> float:
         """Half the unobserved frame periods before a frame ``steps`` periods after the last
@@ -1035,7 +1138,7 @@ class RainGauge:
         if not bgs:
             return float("nan"), 0.0
         prof = self.profile
-        e_r = (float(np.percentile(np.asarray(self._brightness), 90)) if len(self._brightness) >= 10
+        e_r = (self._drop_brightness() if self._brightness_known(10)
                else NOMINAL_DROP_BRIGHTNESS_DN)
         # faint streaks are accepted when noise brightens them, which inflates E_r: it cannot
         # exceed the sensor's white

@@ -1384,6 +1384,58 @@ def _pixel_values(change, flat, cur, contrast):
     return val, raw, cg
 
 
+#: The flanks of a streak begin this far beyond half its detected row width [px].
+FLANK_GAP_PX = 1.5
+
+#: Fewest flank pixels for a row's baseline (fewer: no baseline) [-].
+FLANK_MIN_PIXELS = 8
+
+
+#: Rows on either side over which the flanks' change is averaged for the baseline [px].
+FLANK_HALF_ROWS = 4
+
+
+def _flank_baseline(rb, flank, values, row_k, rstart, ch, K: int, *,
+                    half_rows: int = FLANK_HALF_ROWS) -> np.ndarray:
+    """Local baseline of the change under streaks, per row of their bands [gray levels].
+
+    The band pixels beside a streak (its flanks) carry none of the streak's own change;
+    their mean over the rows within ``half_rows`` of each row (inside the same streak's
+    band) is the offset that other rain (a wide defocused drop near the camera over
+    frame n-1, n or n+1) or a slow change of the scene adds under the streak there.
+    Rows with fewer than :data:`FLANK_MIN_PIXELS` flank pixels in reach get none.
+
+    Parameters
+    ----------
+    rb : (P,) int array
+        Band row of each band pixel (index into the R rows of all the bands).
+    flank : (P,) bool array
+        Whether each band pixel is a flank pixel.
+    values : (P,) array
+        Change of each band pixel [gray levels].
+    row_k, rstart, ch : arrays
+        Streak of each of the R rows; first row and number of rows of each of the K streaks.
+
+    Returns
+    -------
+    (R,) array: the baseline of each band row [gray levels].
+    """
+    R = row_k.size
+    sv = np.bincount(rb[flank], weights=np.asarray(values, dtype=np.float64)[flank], minlength=R)
+    sn = np.bincount(rb[flank], minlength=R).astype(np.float64)
+    cv = np.concatenate(([0.0], np.cumsum(sv)))
+    cn = np.concatenate(([0.0], np.cumsum(sn)))
+    r = np.arange(R)
+    first = rstart[row_k]
+    last = first + ch[row_k] - 1
+    lo = np.maximum(r - int(half_rows), first)
+    hi = np.minimum(r + int(half_rows), last) + 1
+    n = cn[hi] - cn[lo]
+    with np.errstate(all="ignore"):
+        base = np.where(n >= FLANK_MIN_PIXELS, (cv[hi] - cv[lo]) / np.maximum(n, 1.0), 0.0)
+    return base
+
+
 def _group_sum(k, values, K: int) -> np.ndarray:
     """Per-group sums of ``values`` for group indices ``k`` given in ascending order:
     ``np.bincount(k, values, K)`` by one segment reduction (pairwise summation, several
@@ -1438,7 +1490,7 @@ def _axis_moments(img, k, lx, ly, K, x0, y0, x_default, y_default):
     return xm, ym, slope
 
 
-def _cross_width(ks, o, img_s, row_width, K, sigma_min, groups=None):
+def _cross_width(ks, o, img_s, row_width, K, sigma_min, groups=None, refine: bool = True):
     """Apparent width w' of K streaks from their change ``img_s`` at offsets ``o`` across
     the axis [px] (streak ``ks``); ``row_width`` the detected width across [px].
 
@@ -1467,7 +1519,8 @@ def _cross_width(ks, o, img_s, row_width, K, sigma_min, groups=None):
         w_lim = np.clip(np.where(good, w_app, row_width), 0.5 * row_width - 1.0, row_width + 2.0)
         win = np.where(good, 0.5 * w_lim + 1.5, win)
         cen_o = np.where(good, cen, cen_o)
-    w_app = _refine_box_width(ks, o, img_s, cen, w_app, K)
+    if refine:
+        w_app = _refine_box_width(ks, o, img_s, cen, w_app, K)
     return cen, w_app, c0
 
 
@@ -1487,7 +1540,8 @@ def _masked_row_median(a: np.ndarray, mask: np.ndarray) -> np.ndarray:
 def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarray, select, *,
                          valid: np.ndarray | None = None, margin_px: int = 4,
                          sigma_min: float = SHARP_SIGMA_PX, cur: np.ndarray | None = None,
-                         prev: np.ndarray | None = None, contrast=None, noise_sigma: float = 2.0) -> dict:
+                         prev: np.ndarray | None = None, contrast=None, noise_sigma: float = 2.0,
+                         baseline: bool = True) -> dict:
     """Closed-form measurement of many uniform streaks at once (no iteration, no loop over streaks).
 
     The same quantities as :class:`StreakProps` (``shape="uniform"``), from moments instead
@@ -1520,6 +1574,13 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
         (Eq. 18), removing the background's texture from the profiles; needs ``cur``.
     noise_sigma : float
         Noise of the change [gray levels] (for ``chi2``).
+    baseline : bool
+        Subtract each streak's local baseline (:func:`_flank_baseline`): the change of the
+        pixels beside it, a line along the fall.  A wide, faint defocused drop near the
+        camera over frame n-1 or n+1 lowers I_n - (I_{n-1} + I_{n+1}) / 2 under a
+        focused streak of frame n by a smooth offset (over n raises it); the flanks of the
+        streak see the same offset, so the plateau, the width and the ends are measured
+        on the streak's own change.
 
     Returns
     -------
@@ -1529,6 +1590,27 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     two-signed changes of moving scenery), ``ok`` and the streaks' own pixels ``own_k, own_y, own_x``
     (index into the K streaks, row, column).
     """
+    kw = dict(valid=valid, margin_px=margin_px, sigma_min=sigma_min, cur=cur, prev=prev, contrast=contrast,
+              noise_sigma=noise_sigma)
+    if not baseline:
+        return _measure_streak_table_once(change, labels, stats, select, **kw)
+    # a first look, for the widths only (moments, no refinement, no Eq. 18 fit), against the
+    # flanks just beyond the detected pixels
+    first = _measure_streak_table_once(change, labels, stats, select, **{**kw, "prev": None}, refine=False,
+                                       baseline_width=np.zeros(np.size(select)))
+    if first["label"].size == 0:
+        return first
+    # then against the flanks beyond both the detected row width and that first width (a
+    # faint, wide defocused streak is detected only along its core)
+    return _measure_streak_table_once(change, labels, stats, select, baseline_width=first["width_apparent"], **kw)
+
+
+def _measure_streak_table_once(change, labels, stats, select, *, valid=None, margin_px: int = 4,
+                               sigma_min: float = SHARP_SIGMA_PX, cur=None, prev=None, contrast=None,
+                               noise_sigma: float = 2.0, baseline_width=None, refine: bool = True) -> dict:
+    """One pass of :func:`measure_streak_table`; with ``baseline_width`` (K,) [px] the band
+    reaches beyond half of max(detected row width, baseline_width) and its flanks there set
+    each streak's baseline."""
     L = np.asarray(select, dtype=np.int64)
     K = L.size
     M, N = labels.shape
@@ -1545,6 +1627,10 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     # the band used below reaches 0.5 w_row + 1.5 + m/2 px from the axis, which lies inside
     # the detected pixels: m + 2 px beyond the box hold it
     mh = m + 2
+    if baseline_width is not None:
+        bw = np.nan_to_num(np.asarray(baseline_width, dtype=np.float64), nan=0.0, posinf=0.0)
+        bw = np.clip(bw, 0.0, 4.0 * np.maximum(w, 1) + 8.0)
+        mh = mh + np.ceil(0.5 * bw).astype(np.int64)
     x0 = np.maximum(x - mh, 0)
     x1 = np.minimum(x + w + mh, N)
     y0 = np.maximum(y - m, 0)
@@ -1569,7 +1655,8 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     row_width = np.bincount(ko, minlength=K) / np.maximum(n_rows, 1)
     # -- the band around the axis (|offset| <= half, inside the crop [x0, x1) and not on
     # another streak), built row by row from the axis, row sums
-    half = 0.5 * row_width + 1.5 + m / 2
+    band_width = row_width if baseline_width is None else np.maximum(row_width, bw)
+    half = 0.5 * band_width + 1.5 + m / 2
     row_y = y0[row_k] + (np.arange(R) - rstart[row_k])
     axis_x = xm[row_k] + slope[row_k] * (row_y - ym[row_k])
     bx0 = np.clip(np.floor(axis_x - half[row_k]).astype(np.int64), x0[row_k], x1[row_k])
@@ -1585,6 +1672,9 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     ib = np.flatnonzero((np.abs(ob) <= half[kb]) & ~((lab_b != 0) & (lab_b != L[kb]) & valid[lab_b]))
     kb, rb, ob, gyb = kb[ib], rb[ib], ob[ib], gyb_i[ib].astype(np.float64)
     img_b = _pixel_values(change, flat_b[ib], cur, contrast)[0]
+    if baseline_width is not None:
+        flank = np.abs(ob) > (0.5 * band_width + FLANK_GAP_PX)[kb]
+        img_b = img_b - _flank_baseline(rb, flank, img_b, row_k, rstart, ch, K)[rb]
     row_sum = _group_sum(rb, img_b, R)
     H = int(ch.max())
     col = np.arange(R) - rstart[row_k]
@@ -1612,7 +1702,7 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     bot_r = last + y0
     # -- cross profile on the plateau rows: second moment of the change across the axis
     cos_t = 1.0 / np.sqrt(1.0 + slope ** 2)
-    w_guess = np.maximum(row_width * cos_t - 2.0, 1.0)
+    w_guess = np.maximum(band_width * cos_t - 2.0, 1.0)
     lo_r = top_r + 0.5 * w_guess + 1.0
     hi_r = bot_r - 0.5 * w_guess - 1.0
     n_plateau_rows = np.floor(np.minimum(hi_r, y1 - 1.0)) - np.ceil(np.maximum(lo_r, y0)) + 1
@@ -1624,7 +1714,7 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     o = ob[js] * cos_t[ks]
     n_cross = np.bincount(ks, minlength=K)
     g_s = _Groups(ks, K)
-    cen, w_app, c0 = _cross_width(ks, o, img_s, row_width * cos_t, K, sigma_min, groups=g_s)
+    cen, w_app, c0 = _cross_width(ks, o, img_s, band_width * cos_t, K, sigma_min, groups=g_s, refine=refine)
     ok = has & (c0 > 0) & (n_cross >= 6) & np.isfinite(w_app) & (w_app > 0)
     # goodness of the uniform model: the change on the plateau rows against a box of width
     # w' (pixel-integrated) holding the same total, per pixel in units of the noise

@@ -188,8 +188,10 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
     Returns
     -------
     dict of arrays over ``z_m`` (broadcast with ``contrast_dn``): ``p`` (probability),
+    ``p_law`` (the same without the focus test: detected, measured and on the velocity law),
     ``p_detect``, ``apparent_radius_m``, ``apparent_velocity_m_s``, ``width_px``, ``blur_px``,
-    ``motion_px``, ``change_dn`` (the streak's change per pixel).
+    ``motion_px``, ``change_dn`` (the streak's change per pixel), ``q`` (the photometric
+    focus (2 a_i / w')^2) and ``q_sigma`` (its standard error; NaN for ``"pillbox"``).
     """
     from raingauge.physics.camera import blur_circle_px
     from raingauge.physics.drops import fall_velocity
@@ -234,27 +236,79 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
     sig = np.maximum(sig, 1e-6)
     with np.errstate(invalid="ignore"):
         p = np.where(np.isfinite(r) & np.isfinite(sig), ndtr((tol - r) / sig) - ndtr((-tol - r) / sig), 0.0)
+    p_law = p
     if defocus_model == "pillbox":
         bmax = max_blur_px(w, floor_px=blur_floor_px, relative=blur_relative)
         p = p * ndtr((bmax - np.sqrt(blur_variance_factor) * b) / blur_sigma_px)
+        q = s_q = np.full(np.shape(p), np.nan)
     else:
         q = (2.0 * a_img / w_app) ** 2
         rel = signal_rel_sigma(w_app, motion, plateau, noise_change)
+        s_q = q_sigma(q, w_app, width_sigma_px=np.where(np.isfinite(sw), sw, 1.0),
+                      signal_rel_sigma=np.where(np.isfinite(rel), rel, 1.0))
         with np.errstate(invalid="ignore"):
-            p = p * np.where(np.isfinite(sw) & np.isfinite(rel),
-                             ndtr((q - q_min) / q_sigma(q, w_app, width_sigma_px=np.where(np.isfinite(sw), sw, 1.0),
-                                                        signal_rel_sigma=np.where(np.isfinite(rel), rel, 1.0))),
-                             0.0)
+            p = p * np.where(np.isfinite(sw) & np.isfinite(rel), ndtr((q - q_min) / s_q), 0.0)
+            s_q = np.where(np.isfinite(sw) & np.isfinite(rel), s_q, np.nan)
     p_det = np.where(finite_c, detection_probability(change, w_app, threshold_dn=c, noise_sigma_dn=noise,
                                                      smooth_px=smooth_px, length_px=motion + w_app), 1.0)
     margin = np.where(finite_c, detection_margin(change, w_app, threshold_dn=c, noise_sigma_dn=noise,
                                                  smooth_px=smooth_px), np.inf)
     p_size = sizing_probability(2.0 * a_img, margin, np.where(finite_c, row_snr(change, w_app, noise_change), np.inf))
     p = p * p_det * p_size
+    p_law = p_law * p_det * p_size
     if not np.isfinite(v_true):
         p = np.zeros_like(p)
-    return {"p": p, "p_detect": p_det, "apparent_radius_m": a_app, "apparent_velocity_m_s": v_app,
-            "width_px": w, "blur_px": b, "motion_px": motion, "change_dn": change}
+        p_law = np.zeros_like(p_law)
+    return {"p": p, "p_law": p_law, "p_detect": p_det, "apparent_radius_m": a_app,
+            "apparent_velocity_m_s": v_app, "width_px": w, "blur_px": b, "motion_px": motion,
+            "change_dn": change, "q": q, "q_sigma": s_q}
+
+
+#: Percentile of the law-abiding streaks' brightness samples that estimates E_r [%].
+BRIGHTNESS_PERCENTILE = 75.0
+
+#: Narrowest streak whose brightness sample is used [px] (narrower ones are mostly noise).
+BRIGHTNESS_MIN_WIDTH_PX = 2.5
+
+#: Rain rate of the Marshall-Palmer size prior of :attr:`SampleVolume.brightness_q` [mm/h].
+BRIGHTNESS_PRIOR_RATE_MM_H = 10.0
+
+
+def _brightness_percentile_q(parts, q_min: float, *, percentile: float = BRIGHTNESS_PERCENTILE) -> float:
+    """The fixed point m = P{ q' : q' >= q_min m } of the model's measured focus q' [-].
+
+    ``parts``: (radius a [m], law-abiding weight over z [m^3/px^2], q(z), sigma_q(z)) per
+    radius of the grid; the sizes are weighted by a Marshall-Palmer prior, each depth's q'
+    is normal about q(z) with its standard error.
+    """
+    from raingauge.physics.drops import MarshallPalmer
+
+    radii = np.array([p[0] for p in parts])
+    prior = MarshallPalmer(BRIGHTNESS_PRIOR_RATE_MM_H).number_density(2.0 * radii)
+    # the radius grid is log-spaced: da is proportional to a
+    size_w = prior * radii
+    y = np.linspace(0.0, 2.0, 801)
+    dens = np.zeros_like(y)
+    for (a, wt, q, sq), sw in zip(parts, size_w):
+        ok = (wt > 0) & np.isfinite(q) & np.isfinite(sq) & (sq > 0)
+        if not ok.any() or not sw > 0:
+            continue
+        w_, q_, s_ = wt[ok] * sw, q[ok], sq[ok]
+        dens += (w_ / s_) @ np.exp(-0.5 * ((y[None, :] - q_[:, None]) / s_[:, None]) ** 2)
+    if not dens.sum() > 0:
+        return 1.0
+    m = 1.0
+    for _ in range(50):
+        keep = np.where(y >= q_min * m, dens, 0.0)
+        cdf = np.cumsum(keep)
+        if not cdf[-1] > 0:
+            break
+        m_new = float(np.interp(percentile / 100.0, cdf / cdf[-1], y))
+        if abs(m_new - m) < 1e-4:
+            m = m_new
+            break
+        m = m_new
+    return m
 
 
 def whole_streak_area_px2(motion_px, width_px, shape, *, margin_px: float = EDGE_MARGIN_PX) -> np.ndarray:
@@ -351,6 +405,15 @@ class SampleVolume:
 
     Attributes
     ----------
+    brightness_q : float
+        Where the drop brightness estimate of :func:`raingauge.gauge.gauge.drop_brightness_dn`
+        falls, as a fraction of E_r - E_b: the percentile
+        :data:`BRIGHTNESS_PERCENTILE` of the measured photometric focus q of the
+        law-abiding streaks at least :data:`BRIGHTNESS_MIN_WIDTH_PX` wide that pass the focus
+        test at that estimate, predicted by this model (the errors of q included) for
+        Marshall-Palmer rain of :data:`BRIGHTNESS_PRIOR_RATE_MM_H`, at the profile's noise [-].
+    brightness_q_by_noise : ndarray
+        The same over ``noises_dn`` (:meth:`brightness_q_at`) [-].
     kappa_cube : ndarray (n_radii, n_noises, n_contrasts)
         kappa(a, sigma, C) [m^3/px^2] over ``noises_dn`` and ``contrasts_dn``.
     kappa_table : ndarray (n_radii, n_contrasts)
@@ -404,6 +467,7 @@ class SampleVolume:
         b_all = blur_circle_px(z_all, focal_length_px=f, f_number=prof.f_number, focus_distance_m=z0,
                                pixel_pitch_m=_pitch(prof))
         table, zbar, fac = [], [], []
+        q_parts = []
         for a in self.radii_m:
             # the accepted drops lie where the blur is at most about the width (q >= q_min):
             # integrate over that span, generously widened
@@ -421,6 +485,12 @@ class SampleVolume:
                                    detection_threshold_dn=self.detection_threshold_dn)
             wt = res["p"] * (z / f) ** 2 * dz
             k = wt.sum(axis=-1)                                  # (n_noises, n_contrasts + 1)
+            if self.defocus_model == "uniform":
+                shp = res["p"].shape
+                w_app_z = np.broadcast_to(res["apparent_radius_m"], shp)[:, -1] * 2.0 * f / z0
+                law = np.broadcast_to(res["p_law"], shp)[:, -1] * (z / f) ** 2 * dz
+                q_parts.append((a, np.where(w_app_z >= BRIGHTNESS_MIN_WIDTH_PX, law, 0.0),
+                                np.broadcast_to(res["q"], shp)[:, -1], np.broadcast_to(res["q_sigma"], shp)[:, -1]))
             table.append(k)
             kd, wd = float(k[0, -1]), wt[0, -1]
             if kd > 0:
@@ -438,6 +508,10 @@ class SampleVolume:
         self.apparent_radius_factor = np.array(fac)
         # below one pixel of focused width the size cannot be measured
         self.min_radius_m = self.min_width_px * z0 / (2.0 * f)
+        self.brightness_q_by_noise = np.array([
+            _brightness_percentile_q([(a, wt[i], q[i], sq[i]) for a, wt, q, sq in q_parts], self.q_min)
+            if q_parts else 1.0 for i in range(self.noises_dn.size)])
+        self.brightness_q = float(self.brightness_q_by_noise[0])
 
     # -- contrast
     def contrast_weights(self, contrast_dn) -> np.ndarray:
@@ -542,6 +616,13 @@ class SampleVolume:
         i = int(np.clip(np.searchsorted(self.noises_dn, x, side="right") - 1, 0, self.noises_dn.size - 2))
         t = (x - self.noises_dn[i]) / (self.noises_dn[i + 1] - self.noises_dn[i])
         return (1.0 - t) * self.kappa_cube[:, i, :] + t * self.kappa_cube[:, i + 1, :]
+
+    def brightness_q_at(self, noise_dn=None) -> float:
+        """:attr:`brightness_q` at a frame noise [gray levels] (linear between the grid's;
+        default the profile's) [-]."""
+        if noise_dn is None or not np.isfinite(noise_dn):
+            return self.brightness_q
+        return float(np.interp(noise_dn, self.noises_dn, self.brightness_q_by_noise))
 
     def kappa(self, radius_m, contrast_dn=None, *, weights=None, noise_dn=None) -> np.ndarray:
         """kappa(a) [m^3 per px^2 of image], 0 below the measurable size.
