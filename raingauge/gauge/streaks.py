@@ -1391,6 +1391,14 @@ FLANK_GAP_PX = 1.5
 FLANK_MIN_PIXELS = 8
 
 
+#: A streak measured wider than its detected rows by more than this is measured again with
+#: its flanks beyond the measured width [px].
+WIDE_MARGIN_PX = 1.0
+
+#: The per-streak entries of :func:`measure_streak_table` (the others list pixels).
+PER_STREAK_KEYS = ("label", "xm", "ym", "slope", "width_apparent", "top", "bottom", "motion", "plateau",
+                   "background_dn", "beta", "chi2", "ok", "row_width")
+
 #: Rows on either side over which the flanks' change is averaged for the baseline [px].
 FLANK_HALF_ROWS = 4
 
@@ -1490,7 +1498,7 @@ def _axis_moments(img, k, lx, ly, K, x0, y0, x_default, y_default):
     return xm, ym, slope
 
 
-def _cross_width(ks, o, img_s, row_width, K, sigma_min, groups=None, refine: bool = True):
+def _cross_width(ks, o, img_s, row_width, K, sigma_min, groups=None):
     """Apparent width w' of K streaks from their change ``img_s`` at offsets ``o`` across
     the axis [px] (streak ``ks``); ``row_width`` the detected width across [px].
 
@@ -1519,8 +1527,7 @@ def _cross_width(ks, o, img_s, row_width, K, sigma_min, groups=None, refine: boo
         w_lim = np.clip(np.where(good, w_app, row_width), 0.5 * row_width - 1.0, row_width + 2.0)
         win = np.where(good, 0.5 * w_lim + 1.5, win)
         cen_o = np.where(good, cen, cen_o)
-    if refine:
-        w_app = _refine_box_width(ks, o, img_s, cen, w_app, K)
+    w_app = _refine_box_width(ks, o, img_s, cen, w_app, K)
     return cen, w_app, c0
 
 
@@ -1585,7 +1592,7 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     Returns
     -------
     dict of (K,) arrays: ``label, xm, ym, slope, width_apparent, top, bottom, motion,
-    plateau, background_dn, beta, chi2`` (mean squared residual of the plateau rows
+    plateau, background_dn, beta, row_width`` (detected pixels per row), ``chi2`` (mean squared residual of the plateau rows
     against the box of width w', in units of the noise: ~1 for a streak, large for the
     two-signed changes of moving scenery), ``ok`` and the streaks' own pixels ``own_k, own_y, own_x``
     (index into the K streaks, row, column).
@@ -1594,20 +1601,23 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
               noise_sigma=noise_sigma)
     if not baseline:
         return _measure_streak_table_once(change, labels, stats, select, **kw)
-    # a first look, for the widths only (moments, no refinement, no Eq. 18 fit), against the
-    # flanks just beyond the detected pixels
-    first = _measure_streak_table_once(change, labels, stats, select, **{**kw, "prev": None}, refine=False,
-                                       baseline_width=np.zeros(np.size(select)))
-    if first["label"].size == 0:
-        return first
-    # then against the flanks beyond both the detected row width and that first width (a
-    # faint, wide defocused streak is detected only along its core)
-    return _measure_streak_table_once(change, labels, stats, select, baseline_width=first["width_apparent"], **kw)
+    # against the flanks just beyond the detected pixels
+    first = _measure_streak_table_once(change, labels, stats, select, baseline_width=np.zeros(np.size(select)),
+                                       **kw)
+    # a faint, wide (defocused) streak is detected only along its core, and its flanks there
+    # lie on it: measured again against the flanks beyond the width found
+    wide = np.flatnonzero(np.nan_to_num(first["width_apparent"]) > first["row_width"] + WIDE_MARGIN_PX)
+    if wide.size:
+        again = _measure_streak_table_once(change, labels, stats, first["label"][wide],
+                                           baseline_width=first["width_apparent"][wide], **kw)
+        for key in PER_STREAK_KEYS:
+            first[key][wide] = again[key]
+    return first
 
 
 def _measure_streak_table_once(change, labels, stats, select, *, valid=None, margin_px: int = 4,
                                sigma_min: float = SHARP_SIGMA_PX, cur=None, prev=None, contrast=None,
-                               noise_sigma: float = 2.0, baseline_width=None, refine: bool = True) -> dict:
+                               noise_sigma: float = 2.0, baseline_width=None) -> dict:
     """One pass of :func:`measure_streak_table`; with ``baseline_width`` (K,) [px] the band
     reaches beyond half of max(detected row width, baseline_width) and its flanks there set
     each streak's baseline."""
@@ -1617,7 +1627,7 @@ def _measure_streak_table_once(change, labels, stats, select, *, valid=None, mar
     empty = np.zeros(0)
     if K == 0:
         out = {k: empty for k in ("xm", "ym", "slope", "width_apparent", "top", "bottom", "motion",
-                                  "plateau", "background_dn", "beta", "chi2")}
+                                  "plateau", "background_dn", "beta", "chi2", "row_width")}
         out.update(ok=np.zeros(0, bool), label=L, own_k=L, own_y=L, own_x=L)
         return out
     if valid is None:
@@ -1714,7 +1724,7 @@ def _measure_streak_table_once(change, labels, stats, select, *, valid=None, mar
     o = ob[js] * cos_t[ks]
     n_cross = np.bincount(ks, minlength=K)
     g_s = _Groups(ks, K)
-    cen, w_app, c0 = _cross_width(ks, o, img_s, band_width * cos_t, K, sigma_min, groups=g_s, refine=refine)
+    cen, w_app, c0 = _cross_width(ks, o, img_s, band_width * cos_t, K, sigma_min, groups=g_s)
     ok = has & (c0 > 0) & (n_cross >= 6) & np.isfinite(w_app) & (w_app > 0)
     # goodness of the uniform model: the change on the plateau rows against a box of width
     # w' (pixel-integrated) holding the same total, per pixel in units of the noise
@@ -1756,4 +1766,4 @@ def _measure_streak_table_once(change, labels, stats, select, *, valid=None, mar
                 beta = np.where(fit, -cov / np.where(fit, vb, 1.0), np.nan)
     return {"label": L, "xm": xm, "ym": ym, "slope": slope, "width_apparent": w_app, "top": top,
             "bottom": bot, "motion": motion, "plateau": plateau, "background_dn": bg_dn, "beta": beta,
-            "chi2": chi2, "ok": ok, "own_k": ok_k, "own_y": oy, "own_x": ox}
+            "chi2": chi2, "ok": ok, "row_width": row_width, "own_k": ok_k, "own_y": oy, "own_x": ox}
