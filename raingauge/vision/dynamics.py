@@ -83,7 +83,8 @@ def oriented_masks(l: int = 11, *, angles_deg: np.ndarray | None = None, half_wi
     return (dist <= half_width_px + 1e-9).astype(np.float32)
 
 
-def rain_pixel_energies(b: np.ndarray, *, masks: np.ndarray, max_pixels: int | None = None
+def rain_pixel_energies(b: np.ndarray, *, masks: np.ndarray, max_pixels: int | None = None,
+                        work: np.ndarray | None = None, flat: np.ndarray | None = None
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """Directional energy of R_b at each rain pixel of one frame.
 
@@ -98,6 +99,10 @@ def rain_pixel_energies(b: np.ndarray, *, masks: np.ndarray, max_pixels: int | N
         From :func:`oriented_masks`.
     max_pixels : int, optional
         Evaluate at most this many rain pixels, spread evenly [px].
+    work : (M + l - 1, N + l - 1) uint8 array, optional
+        Scratch space for the zero-padded field (overwritten).
+    flat : (P,) int array, optional
+        The flat indices of the rain pixels of ``b`` in increasing order, when known.
 
     Returns
     -------
@@ -113,7 +118,7 @@ def rain_pixel_energies(b: np.ndarray, *, masks: np.ndarray, max_pixels: int | N
     b = np.asarray(b)
     K, l, _ = masks.shape
     h = (l - 1) // 2
-    flat = np.flatnonzero(b.ravel())
+    flat = np.flatnonzero(b.ravel()) if flat is None else np.asarray(flat, np.int64)
     weight = 1.0
     if max_pixels is not None and flat.size > max_pixels:
         step = flat.size / max_pixels
@@ -124,8 +129,10 @@ def rain_pixel_energies(b: np.ndarray, *, masks: np.ndarray, max_pixels: int | N
     cols = flat % cols_n
     if flat.size == 0:
         return rows, cols, np.zeros((0, K), np.float32), weight
+    if work is not None and work.shape != (rows_n + 2 * h, cols_n + 2 * h):
+        work = None
     padded = cv2.copyMakeBorder(b.view(np.uint8) if b.dtype == np.bool_ else b.astype(np.uint8),
-                                h, h, h, h, cv2.BORDER_CONSTANT, value=0)
+                                h, h, h, h, cv2.BORDER_CONSTANT, work, value=0)
     # the l x l window of each pixel (top-left (r, c) in padded coordinates),
     # gathered as whole rows of a strided view: no (P, l*l) index array
     windows = np.lib.stride_tricks.sliding_window_view(padded, (l, l))
@@ -196,14 +203,18 @@ def persistent_cells(persistent: np.ndarray, chance: np.ndarray, *, max_ratio: f
     return np.asarray(persistent) > max_ratio * chance + sigmas * np.sqrt(max_ratio * chance) + 1.0
 
 
-def _persistence_step(b, rows, cols, cid, prev_near, *, radius_px, side_px, grid):
-    """Persistence (0/1) and chance level at the evaluated rain pixels; the dilated field for the next frame."""
+def _persistence_step(b, rows, cols, cid, prev_near, *, radius_px, side_px, grid, work=None, out=None):
+    """Persistence (0/1) and chance level at the evaluated rain pixels; the dilated field for the next frame.
+
+    ``work`` and ``out`` are optional uint8 arrays of the frame's shape for the
+    dilation and for the returned field (not ``prev_near``).
+    """
     import cv2
 
     k = 2 * int(radius_px) + 1
     b8 = np.asarray(b).view(np.uint8) if b.dtype == np.bool_ else np.asarray(b, np.uint8)
     # 0 / 255, so that the area average below keeps its fractions in uint8
-    dil = cv2.compare(cv2.dilate(b8, np.ones((k, k), np.uint8)), 0, cv2.CMP_GT)
+    dil = cv2.compare(cv2.dilate(b8, np.ones((k, k), np.uint8), work), 0, cv2.CMP_GT, out)
     if prev_near is None or rows.size == 0:
         return (np.zeros(rows.size, np.float32), np.zeros(rows.size, np.float32), dil)
     near = (prev_near[rows, cols] > 0).astype(np.float32)
@@ -379,6 +390,11 @@ class RainDynamics:
         self._pers_chance = np.zeros(self._sbh * self._sbw, np.float64)
         self._prev_near: np.ndarray | None = None
         self._ring: deque = deque()
+        # frame-sized scratch arrays reused frame after frame: the padded field,
+        # the dilation, and two fields alternating as the previous frame's
+        self._pad_buf = np.empty((self.shape[0] + 2 * (self.l // 2), self.shape[1] + 2 * (self.l // 2)), np.uint8)
+        self._dil_buf = np.empty(self.shape, np.uint8)
+        self._near_bufs = [np.empty(self.shape, np.uint8), np.empty(self.shape, np.uint8)]
 
     @property
     def frames(self) -> int:
@@ -394,19 +410,24 @@ class RainDynamics:
         self._frames_seen[:] = 0
         self._ring.clear()
 
-    def update(self, b: np.ndarray) -> None:
-        """Add the binary rain field of the newest frame, dropping the one f frames older."""
+    def update(self, b: np.ndarray, *, flat: np.ndarray | None = None) -> None:
+        """Add the binary rain field of the newest frame, dropping the one f frames older.
+
+        ``flat``: the flat indices of the rain pixels of ``b`` (increasing), when known.
+        """
         b = np.asarray(b)
         if b.shape != self.shape:
             raise ValueError(f"binary field has shape {b.shape}, expected {self.shape}")
-        rows, cols, energy, w = rain_pixel_energies(b, masks=self.masks, max_pixels=self.max_pixels)
+        rows, cols, energy, w = rain_pixel_energies(b, masks=self.masks, max_pixels=self.max_pixels,
+                                                    work=self._pad_buf, flat=flat)
         side = self.cell * self.stride
         cid = (rows // side) * self._sbw + cols // side
         near = chance = None
         if self.persistence_px > 0:
+            out = self._near_bufs[0] if self._prev_near is not self._near_bufs[0] else self._near_bufs[1]
             near, chance, self._prev_near = _persistence_step(
                 b, rows, cols, cid, self._prev_near, radius_px=self.persistence_px, side_px=side,
-                grid=(self._sbh, self._sbw))
+                grid=(self._sbh, self._sbw), work=self._dil_buf, out=out)
         # Sum the frame's contributions per cell (sorted segments, no scatter-add).
         if cid.size:
             order = np.argsort(cid, kind="stable")
@@ -428,7 +449,10 @@ class RainDynamics:
         self._cnt[ucid] += n
         self._pers[ucid] += pn
         self._pers_chance[ucid] += pc
-        blocks = np.unique((rows // self.block) * self.bw + cols // self.block)
+        # the blocks that saw rain, in increasing order (np.unique, without the sort)
+        seen = np.zeros(self.bh * self.bw, bool)
+        seen[(rows // self.block) * self.bw + cols // self.block] = True
+        blocks = np.flatnonzero(seen)
         self._frames_seen[blocks] += 1
         self._ring.append((ucid, e, n, blocks, pn, pc))
         while len(self._ring) > self.f:
@@ -460,10 +484,14 @@ class RainDynamics:
         # rho^2 (|mask| - 1): in dense rain, streaks crossing the perpendicular
         # mask would otherwise hide the directionality.
         rho = (events / area)[..., None]
-        energy = sm * (self._mask_norm / area) - rho * rho * self._chance
-        energy = np.maximum(energy, 0.0)
-        emax = energy.max(axis=2)
-        emin = energy.min(axis=2)
+        # (in place on sm, a new array: the same operations as
+        # sm * norm - rho^2 * chance, clipped at 0, without temporaries)
+        energy = np.multiply(sm, self._mask_norm / area, out=sm)
+        np.subtract(energy, np.multiply(rho * rho, self._chance), out=energy)
+        np.maximum(energy, 0.0, out=energy)
+        flat_e = energy.reshape(-1, self.K)
+        emax = cv2.reduce(flat_e, 1, cv2.REDUCE_MAX).reshape(bh, bw)
+        emin = cv2.reduce(flat_e, 1, cv2.REDUCE_MIN).reshape(bh, bw)
         kmax = energy.argmax(axis=2)
         floor = 0.05 * rho[..., 0]
         with np.errstate(divide="ignore", invalid="ignore"):

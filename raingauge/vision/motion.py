@@ -91,8 +91,11 @@ def _refine_translation(ref: np.ndarray, mov: np.ndarray, dx: float, dy: float, 
         full = _translate_cubic(mov, dx, dy, a=-0.5)
         warped = full[inner]
         e = warped - np.float32(warped.mean()) - r
-        gx = cv2.Sobel(full, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)[inner]
-        gy = cv2.Sobel(full, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)[inner]
+        # the gradient on the inner part (and the one pixel around it that its 3 x 3 kernel reads),
+        # contiguous once for the four dot products
+        grown = full[m - 1:h - m + 1, m - 1:w - m + 1]
+        gx = np.ascontiguousarray(cv2.Sobel(grown, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)[1:-1, 1:-1])
+        gy = np.ascontiguousarray(cv2.Sobel(grown, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)[1:-1, 1:-1])
         H = np.array([[np.vdot(gx, gx), np.vdot(gx, gy)], [np.vdot(gx, gy), np.vdot(gy, gy)]], np.float64)
         if not np.linalg.det(H) > 1e-9 * max(H[0, 0] * H[1, 1], 1e-30):
             break
@@ -226,7 +229,8 @@ def _cubic_weights(t: float, a: float = -0.5) -> np.ndarray:
     return np.array([k(1.0 + t), k(t), k(1.0 - t), k(2.0 - t)], dtype=np.float32)
 
 
-def _translate_cubic(src: np.ndarray, dx: float, dy: float, *, a: float = -0.75) -> np.ndarray:
+def _translate_cubic(src: np.ndarray, dx: float, dy: float, *, a: float = -0.75,
+                     work: np.ndarray | None = None, out: np.ndarray | None = None) -> np.ndarray:
     """``out(x, y) = src(x + dx, y + dy)``, bicubic, replicated border: the translation case of warp_to.
 
     A separable 4-tap filter for the fraction and a whole-pixel shift (a
@@ -234,7 +238,8 @@ def _translate_cubic(src: np.ndarray, dx: float, dy: float, *, a: float = -0.75)
     ``cv2.warpAffine`` with ``INTER_CUBIC`` (a = -0.75, the sharper kernel,
     used to align neighbours for the three-frame test) at a fraction of its
     cost and with an exact fraction (OpenCV quantises it to 1/32 px).
-    Registration uses a = -0.5, which moves a ramp exactly.
+    Registration uses a = -0.5, which moves a ramp exactly.  ``work`` (float32,
+    the shape of ``src``) holds the intermediate when given, ``out`` the result.
     """
     import cv2
 
@@ -246,14 +251,16 @@ def _translate_cubic(src: np.ndarray, dx: float, dy: float, *, a: float = -0.75)
     kx = _cubic_weights(dx - ix, a)
     ky = _cubic_weights(dy - iy, a)
     # the fraction: dst(x) = sum_j k[j] src(x + j - 1), anchor 1 puts the weights on offsets -1..2
-    frac = cv2.sepFilter2D(src, cv2.CV_32F, kx, ky, anchor=(1, 1), borderType=cv2.BORDER_REPLICATE)
+    frac = cv2.sepFilter2D(src, cv2.CV_32F, kx, ky, dst=work, anchor=(1, 1), borderType=cv2.BORDER_REPLICATE)
     # the whole pixels: a slice, the uncovered side replicated
     view = frac[max(0, iy):h + min(0, iy), max(0, ix):w + min(0, ix)]
-    return cv2.copyMakeBorder(view, max(0, -iy), max(0, iy), max(0, -ix), max(0, ix), cv2.BORDER_REPLICATE)
+    return cv2.copyMakeBorder(view, max(0, -iy), max(0, iy), max(0, -ix), max(0, ix), cv2.BORDER_REPLICATE, out)
 
 
 def warp_to(frame: np.ndarray, M: np.ndarray, *, min_shift_px: float | None = None,
-            with_valid: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+            with_valid: bool = True, work: np.ndarray | None = None,
+            out: np.ndarray | None = None, valid_out: np.ndarray | None = None
+            ) -> tuple[np.ndarray, np.ndarray | None]:
     """Warp ``frame`` into the reference frame: ``aligned(x) = frame(M x)``.
 
     Parameters
@@ -269,6 +276,13 @@ def warp_to(frame: np.ndarray, M: np.ndarray, *, min_shift_px: float | None = No
         the other, so it creates no one-frame spike.
     with_valid : bool
         Also return the (M, N) bool mask of pixels that fall inside ``frame``.
+    work : float32 array like ``frame``, optional
+        Scratch space for the intermediate of a translation (its contents
+        are overwritten); saves an allocation per call in a frame loop.
+    out : float32 array like ``frame``, optional
+        Where to write a translated frame (other warps allocate their own).
+    valid_out : (M, N) bool array, optional
+        Where to write the valid mask of a translation.
 
     Returns
     -------
@@ -287,7 +301,11 @@ def warp_to(frame: np.ndarray, M: np.ndarray, *, min_shift_px: float | None = No
     affine = is_affine(M)
     translation = affine and is_translation(M)
     if translation and src.dtype == np.float32:
-        out = _translate_cubic(src, float(M[0, 2]), float(M[1, 2]))
+        if work is not None and (work.shape != src.shape or work.dtype != np.float32):
+            work = None
+        if out is not None and (out.shape != src.shape or out.dtype != np.float32):
+            out = None
+        out = _translate_cubic(src, float(M[0, 2]), float(M[1, 2]), work=work, out=out)
     elif affine:
         out = cv2.warpAffine(src, M[:2].astype(np.float64), (w, h), flags=flags,
                              borderMode=cv2.BORDER_REPLICATE)
@@ -297,7 +315,11 @@ def warp_to(frame: np.ndarray, M: np.ndarray, *, min_shift_px: float | None = No
     if with_valid:
         if translation:
             dx, dy = M[0, 2], M[1, 2]
-            valid = np.zeros((h, w), dtype=bool)
+            if valid_out is not None and valid_out.shape == (h, w) and valid_out.dtype == np.bool_:
+                valid = valid_out
+                valid.fill(False)
+            else:
+                valid = np.zeros((h, w), dtype=bool)
             x0 = max(int(math.ceil(-dx)), 0)
             x1 = min(int(math.floor(w - 1 - dx)), w - 1)
             y0 = max(int(math.ceil(-dy)), 0)
@@ -338,6 +360,7 @@ class MotionTracker:
         self._prev_full = None
         self._window = None
         self._G: dict[int, np.ndarray] = {}
+        self._between: dict[tuple[int, int], np.ndarray] = {}
         self._count = 0
 
     def add(self, frame: np.ndarray) -> int:
@@ -368,8 +391,13 @@ class MotionTracker:
         old = k - 64   # keep memory bounded
         if old in self._G:
             del self._G[old]
+            for key in [key for key in self._between if old in key]:
+                del self._between[key]
         return k
 
     def between(self, j: int, n: int) -> np.ndarray:
         """Transform warping frame j into frame n."""
-        return np.linalg.solve(self._G[j], self._G[n])
+        M = self._between.get((j, n))
+        if M is None:
+            M = self._between[(j, n)] = np.linalg.solve(self._G[j], self._G[n])
+        return M.copy()

@@ -403,10 +403,58 @@ def _fit(prev, cur, nxt, mask, *, beta_max, labels, noise_sigma, min_pixels, max
         lab, n = _label(mask)
     else:
         lab, n = labels
-    cols = lab.shape[1]
     flat_lab = lab.ravel()
     idx = np.flatnonzero(np.asarray(mask).ravel()) if labels is None else np.flatnonzero(flat_lab)
     li = flat_lab[idx]
+    idx, lj, keep_ids = _big_streaks(idx, li, n, min_pixels)
+    x = prev.ravel()[idx].astype(np.float64)                           # background I_{n-1}
+    z = nxt.ravel()[idx].astype(np.float64)                            # background I_{n+1}
+    c = cur.ravel()[idx]
+    t = _streak_tests(idx, lj, keep_ids.size, x, c, z, lab.shape, beta_max=beta_max, noise_sigma=noise_sigma,
+                      max_relative_residual=max_relative_residual, residual_sigmas=residual_sigmas,
+                      slope_sigmas=slope_sigmas, cluster_px=cluster_px)
+    m = keep_ids.size
+    cols = lab.shape[1]
+    lj, cnt, safe = t["lj"], t["cnt"], t["safe"]
+    rr = (idx // cols).astype(np.float64)
+    cc = (idx % cols).astype(np.float64)
+    sr = np.bincount(lj, rr, m)
+    sc = np.bincount(lj, cc, m)
+    srr = np.bincount(lj, rr * rr, m)
+    scc = np.bincount(lj, cc * cc, m)
+    src = np.bincount(lj, rr * cc, m)
+    rmin = np.full(m, np.inf); rmax = np.full(m, -np.inf)
+    cmin = np.full(m, np.inf); cmax = np.full(m, -np.inf)
+    _segment_min(rmin, lj, rr); _segment_max(rmax, lj, rr)
+    _segment_min(cmin, lj, cc); _segment_max(cmax, lj, cc)
+    bbox = np.column_stack([cmin, rmin, cmax - cmin + 1, rmax - rmin + 1]).astype(np.int32) if m else \
+        np.zeros((0, 4), dtype=np.int32)
+
+    # Geometry (centroid and second moments of the pixel positions).
+    mr, mc = sr / safe, sc / safe
+    mu_rr = np.maximum(srr / safe - mr * mr, 0.0)
+    mu_cc = np.maximum(scc / safe - mc * mc, 0.0)
+    mu_rc = src / safe - mr * mc
+    # screen coordinates: u = column, v = -row
+    orient = np.degrees(0.5 * np.arctan2(-2.0 * mu_rc, mu_cc - mu_rr)) % 180.0
+    tr = mu_rr + mu_cc
+    disc = np.sqrt(np.maximum((mu_cc - mu_rr) ** 2 / 4.0 + mu_rc ** 2, 0.0))
+    # 4 sqrt(lambda) as regionprops; at least one pixel
+    major = np.maximum(4.0 * np.sqrt(tr / 2.0 + disc), 1.0)
+    minor = np.maximum(4.0 * np.sqrt(np.maximum(tr / 2.0 - disc, 0.0)), 1.0)
+
+    fits = StreakFits(
+        labels=lab, label=keep_ids.astype(np.int32), area=cnt.astype(np.int64), bbox=bbox,
+        centroid=np.column_stack([mc, mr]), orientation_deg=orient, major_axis_px=major,
+        minor_axis_px=minor, mean_change=t["my"], max_change=t["ymax"], mean_background=t["mx"], beta=t["beta"],
+        alpha=t["alpha"], beta_se=t["se"], residual_rms=t["resid_rms"], background_change_rms=t["bg_change"],
+        linear=t["linear"], slope_ok=t["slope_ok"], stationary=t["stationary"], accepted=t["accepted"],
+    )
+    return fits, idx, lj
+
+
+def _big_streaks(idx, li, n, min_pixels):
+    """The pixels of the streaks of at least ``min_pixels``: (idx, compact streak index, label of each streak)."""
     # Discard the streaks too small to be rain before any fitting.
     area_all = np.bincount(li, minlength=n + 1)
     big = area_all >= max(int(min_pixels), 1)
@@ -416,12 +464,21 @@ def _fit(prev, cur, nxt, mask, *, beta_max, labels, noise_sigma, min_pixels, max
     idx, li = idx[sel], li[sel]
     compact = np.zeros(n + 1, dtype=np.int64)
     compact[keep_ids] = np.arange(keep_ids.size)
-    lj = compact[li]
-    m = keep_ids.size
+    return idx, compact[li], keep_ids
 
-    x = prev.ravel()[idx].astype(np.float64)                           # background I_{n-1}
-    z = nxt.ravel()[idx].astype(np.float64)                            # background I_{n+1}
-    y = cur.ravel()[idx].astype(np.float64) - z                        # change against I_{n+1}
+
+def _streak_tests(idx, lj, m, x, c, z, shape, *, beta_max, noise_sigma, max_relative_residual, residual_sigmas,
+                  slope_sigmas, cluster_px=8, ymax=True):
+    """The Eq. (18) fit and tests of :func:`fit_streaks` on the pixels of m streaks.
+
+    ``idx`` are the flat pixel indices in a frame of ``shape``, in increasing
+    order, ``lj`` their streak (0..m-1), ``x`` and ``z`` the float64 values of
+    I_{n-1} and I_{n+1}, ``c`` those of I_n.  Every per-streak sum runs over
+    the pixels in the order given, so the result does not depend on how the
+    streaks are numbered.
+    """
+    cols = shape[1]
+    y = c.astype(np.float64) - z                                       # change against I_{n+1}
     cnt = np.bincount(lj, minlength=m).astype(np.float64)
     sx = np.bincount(lj, x, m)
     sy = np.bincount(lj, y, m)
@@ -429,21 +486,10 @@ def _fit(prev, cur, nxt, mask, *, beta_max, labels, noise_sigma, min_pixels, max
     sxy = np.bincount(lj, x * y, m)
     syy = np.bincount(lj, y * y, m)
     sbb = np.bincount(lj, (x - z) ** 2, m)
-    rr = (idx // cols).astype(np.float64)
-    cc = (idx % cols).astype(np.float64)
-    sr = np.bincount(lj, rr, m)
-    sc = np.bincount(lj, cc, m)
-    srr = np.bincount(lj, rr * rr, m)
-    scc = np.bincount(lj, cc * cc, m)
-    src = np.bincount(lj, rr * cc, m)
-    ymax = np.full(m, -np.inf)
-    _segment_max(ymax, lj, y)
-    rmin = np.full(m, np.inf); rmax = np.full(m, -np.inf)
-    cmin = np.full(m, np.inf); cmax = np.full(m, -np.inf)
-    _segment_min(rmin, lj, rr); _segment_max(rmax, lj, rr)
-    _segment_min(cmin, lj, cc); _segment_max(cmax, lj, cc)
-    bbox = np.column_stack([cmin, rmin, cmax - cmin + 1, rmax - rmin + 1]).astype(np.int32) if m else \
-        np.zeros((0, 4), dtype=np.int32)
+    ym = None
+    if ymax:
+        ym = np.full(m, -np.inf)
+        _segment_max(ym, lj, y)
 
     safe = np.maximum(cnt, 1.0)
     mx, my = sx / safe, sy / safe
@@ -483,7 +529,7 @@ def _fit(prev, cur, nxt, mask, *, beta_max, labels, noise_sigma, min_pixels, max
             bpx = int(cluster_px)
             nbc = cols // bpx + 1
             block = (sidx // cols) // bpx * nbc + (sidx % cols) // bpx
-            stride = (lab.shape[0] // bpx + 1) * nbc
+            stride = (shape[0] // bpx + 1) * nbc
             uniq, inv = np.unique(sj * stride + block, return_inverse=True)
             owner = uniq // stride
             res = sy_ - my[sj] - slope[sj] * (sx_ - mx[sj])
@@ -506,28 +552,143 @@ def _fit(prev, cur, nxt, mask, *, beta_max, labels, noise_sigma, min_pixels, max
         hi = beta + slope_sigmas * se + shift
     slope_ok = (hi >= 0.0) & (lo <= beta_max)
     accepted = linear & slope_ok & stationary & (my > 0)
+    return dict(lj=lj, cnt=cnt, safe=safe, mx=mx, my=my, ymax=ym, beta=beta, alpha=alpha, se=se,
+                resid_rms=resid_rms, bg_change=bg_change, linear=linear, slope_ok=slope_ok,
+                stationary=stationary, accepted=accepted)
 
-    # Geometry (centroid and second moments of the pixel positions).
-    mr, mc = sr / safe, sc / safe
-    mu_rr = np.maximum(srr / safe - mr * mr, 0.0)
-    mu_cc = np.maximum(scc / safe - mc * mc, 0.0)
-    mu_rc = src / safe - mr * mc
-    # screen coordinates: u = column, v = -row
-    orient = np.degrees(0.5 * np.arctan2(-2.0 * mu_rc, mu_cc - mu_rr)) % 180.0
-    tr = mu_rr + mu_cc
-    disc = np.sqrt(np.maximum((mu_cc - mu_rr) ** 2 / 4.0 + mu_rc ** 2, 0.0))
-    # 4 sqrt(lambda) as regionprops; at least one pixel
-    major = np.maximum(4.0 * np.sqrt(tr / 2.0 + disc), 1.0)
-    minor = np.maximum(4.0 * np.sqrt(np.maximum(tr / 2.0 - disc, 0.0)), 1.0)
 
-    fits = StreakFits(
-        labels=lab, label=keep_ids.astype(np.int32), area=cnt.astype(np.int64), bbox=bbox,
-        centroid=np.column_stack([mc, mr]), orientation_deg=orient, major_axis_px=major,
-        minor_axis_px=minor, mean_change=my, max_change=ymax, mean_background=mx, beta=beta,
-        alpha=alpha, beta_se=se, residual_rms=resid_rms, background_change_rms=bg_change, linear=linear,
-        slope_ok=slope_ok, stationary=stationary, accepted=accepted,
-    )
-    return fits, idx, lj
+def _label_pixels(flat, shape):
+    """8-connected components of the sparse pixel set ``flat`` (increasing flat indices), ((P,) labels 1..n, n).
+
+    The same components as :func:`_label` on the mask of these pixels,
+    possibly numbered differently, at a cost that grows with the pixels
+    rather than the frame.
+    """
+    flat = np.asarray(flat, np.int64)
+    P = flat.size
+    if P == 0:
+        return np.zeros(0, np.int64), 0
+    W = int(shape[1])
+    col = flat % W
+    ii = np.arange(P)
+    # forward neighbours: the right one (next in the sorted list if present) and
+    # the three below (consecutive in the list from the first one >= flat + W - 1);
+    # the other four are their mirror images
+    right = np.flatnonzero((flat[1:] == flat[:-1] + 1) & (col[:-1] < W - 1))
+    src, dst = [right], [right + 1]
+    pos0 = np.searchsorted(flat, flat + (W - 1))
+    for k in range(3):
+        pos = np.minimum(pos0 + k, P - 1)
+        d = flat[pos] - flat - W          # -1, 0, 1: below left, below, below right
+        hit = ((d == 0) | ((d == -1) & (col > 0)) | ((d == 1) & (col < W - 1))) & (pos0 + k < P)
+        src.append(ii[hit])
+        dst.append(pos[hit])
+    src = np.concatenate(src)
+    dst = np.concatenate(dst)
+    lab = _merge_edges(src, dst, P)
+    if lab is None:     # slow to converge (long winding shapes): a graph library
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        graph = coo_matrix((np.ones(src.size, np.int8), (src, dst)), shape=(P, P)).tocsr()
+        n, lab = connected_components(graph, directed=False)
+        return lab.astype(np.int64) + 1, int(n)
+    roots = np.cumsum(lab == ii)      # the roots numbered 1..n
+    return roots[lab], int(roots[-1])
+
+
+def _merge_edges(src, dst, P, max_rounds=64):
+    """Connected components of P nodes joined by the edges (src, dst): each node's root (a node of its
+    component, the same for the whole component), or None when ``max_rounds`` were not enough.
+
+    Every round hooks, for each edge whose two ends disagree, the larger of
+    their labels onto the smaller, then follows the labels to their roots;
+    labels only ever become labels of connected nodes, and the rounds end
+    when every edge has one label at both ends.
+    """
+    lab = np.arange(P)
+    for _ in range(max_rounds):
+        a = lab[src]
+        b = lab[dst]
+        differ = a != b
+        if not differ.any():
+            return lab
+        a, b = a[differ], b[differ]
+        np.minimum.at(lab, np.maximum(a, b), np.minimum(a, b))
+        while True:
+            up = lab[lab]
+            if np.array_equal(up, lab):
+                break
+            lab = up
+    return None
+
+
+def _accept_pixels(flat, x, c, z, shape, *, beta_max, noise_sigma, min_pixels, max_relative_residual=0.35,
+                   residual_sigmas=3.0, slope_sigmas=2.0, cluster_px=8):
+    """:func:`photometric_filter` on a sparse pixel set: the accepted pixels of ``flat``, (P,) bool.
+
+    ``flat`` are increasing flat indices of the candidate pixels in a frame of
+    ``shape``, ``x``, ``c``, ``z`` the (P,) values of I_{n-1}, I_n, I_{n+1}
+    there; the verdicts equal those of :func:`photometric_filter` on frames
+    holding these values.
+    """
+    import cv2
+
+    if not (math.isfinite(beta_max) and beta_max > 0):
+        raise ValueError(f"beta_max must be a positive number, got {beta_max!r}")
+    if flat.size * 128 < shape[0] * shape[1]:
+        li, n = _label_pixels(flat, shape)
+    else:   # dense: the frame-sized labelling is cheaper
+        m8 = np.zeros(shape, np.uint8)
+        m8.ravel()[flat] = 1
+        n, lab = cv2.connectedComponents(m8, connectivity=8, ltype=cv2.CV_32S)
+        li, n = lab.ravel()[flat], n - 1
+    pos = np.arange(flat.size)
+    pos, lj, keep_ids = _big_streaks(pos, li, n, min_pixels)
+    out = np.zeros(flat.size, bool)
+    if keep_ids.size == 0:
+        return out
+    t = _streak_tests(flat[pos], lj, keep_ids.size, np.asarray(x)[pos].astype(np.float64), np.asarray(c)[pos],
+                      np.asarray(z)[pos].astype(np.float64), shape, beta_max=beta_max, noise_sigma=noise_sigma,
+                      max_relative_residual=max_relative_residual, residual_sigmas=residual_sigmas,
+                      slope_sigmas=slope_sigmas, cluster_px=cluster_px, ymax=False)
+    out[pos] = t["accepted"][lj]
+    return out
+
+
+def _accepted_mask(prev, cur, nxt, mask, *, beta_max, noise_sigma=1.0, min_pixels=5, max_relative_residual=0.35,
+                   residual_sigmas=3.0, slope_sigmas=2.0, cluster_px=8, labels_out=None, with_index=False):
+    """The accepted mask of :func:`photometric_filter` and the number of accepted streaks, without the fits.
+
+    ``mask`` is a C-contiguous (M, N) bool array; ``labels_out`` an optional
+    (M, N) int32 array that receives the label image (scratch space).  With
+    ``with_index`` the flat indices of the accepted pixels (increasing) come third.
+    """
+    import cv2
+
+    if not (math.isfinite(beta_max) and beta_max > 0):
+        raise ValueError(f"beta_max must be a positive number, got {beta_max!r}")
+    m8 = mask.view(np.uint8)
+    if labels_out is None:
+        n, lab = cv2.connectedComponents(m8, connectivity=8, ltype=cv2.CV_32S)
+    else:
+        n, lab = cv2.connectedComponents(m8, labels_out, 8, cv2.CV_32S)
+    idx = np.flatnonzero(mask.ravel())
+    idx, lj, keep_ids = _big_streaks(idx, lab.ravel()[idx], n - 1, min_pixels)
+    out = np.zeros(mask.shape, bool)
+    if keep_ids.size == 0:
+        return (out, 0, idx[:0]) if with_index else (out, 0)
+    x = prev.ravel()[idx].astype(np.float64)
+    z = nxt.ravel()[idx].astype(np.float64)
+    t = _streak_tests(idx, lj, keep_ids.size, x, cur.ravel()[idx], z, mask.shape, beta_max=beta_max,
+                      noise_sigma=noise_sigma, max_relative_residual=max_relative_residual,
+                      residual_sigmas=residual_sigmas, slope_sigmas=slope_sigmas, cluster_px=cluster_px, ymax=False)
+    acc = t["accepted"]
+    on = acc[lj]
+    out.ravel()[idx] = on
+    if with_index:
+        return out, int(np.count_nonzero(acc)), idx[on]
+    return out, int(np.count_nonzero(acc))
 
 
 def _label(mask):

@@ -31,7 +31,7 @@ from raingauge.vision.candidates import candidates, hysteresis_candidates, lumin
 from raingauge.vision.dynamics import DynamicsField, RainDynamics
 from raingauge.vision.motion import (WARP_MIN_SHIFT_PX, MotionTracker, is_affine, is_translation,
                                      transform_magnitude_px, warp_to)
-from raingauge.vision.photometric import StreakFits, beta_max_for_exposure, photometric_filter
+from raingauge.vision.photometric import StreakFits, _accepted_mask, beta_max_for_exposure, photometric_filter
 from raingauge.vision.removal import RUNS, multi_frame_hits, remove_window, run_pair
 
 __all__ = ["detect_streaks", "Derainer", "DerainedFrame", "derain_clip", "estimate_noise_sigma",
@@ -134,12 +134,15 @@ class _Unique:
     lum: np.ndarray          # luminance, float32 (M, N)
     inputs: list             # input indices showing this frame
     b: np.ndarray | None = None
+    b_idx: np.ndarray | None = None   # flat indices of the pixels of b, when known
     n_streaks: int = 0       # accepted streaks (the label image is not kept)
     rise: np.ndarray | None = None   # I_n - I_{n-1} >= c (own coordinates)
     fall: np.ndarray | None = None   # I_n - I_{n+1} >= c
     warped: bool = False
     moving: np.ndarray | None = None   # local scene motion (see local_motion_mask)
     aligned: tuple | None = None       # luminance of units k-1, k+1 warped into this one
+    pooled: list = dataclasses.field(default_factory=list)   # arrays handed back to the pool when done
+    sub: np.ndarray | None = None      # every 4th pixel of lum, every 4th row (the repeat test)
 
 
 class Derainer:
@@ -210,6 +213,14 @@ class Derainer:
         c / 2) is rain (see :func:`raingauge.vision.removal.multi_frame_hits`);
         0 keeps only the free-standing runs.  The removal keeps the paper's
         rule.
+
+    Notes
+    -----
+    Cost.  The temporaries of each frame live in frame-sized scratch arrays
+    kept from frame to frame (about 40 bytes per pixel in all), and the
+    arrays of finished frames (linearised frame, warped neighbours, one-sided
+    tests, run masks) are reused for the next ones, so a stream allocates
+    almost no frame-sized memory once it runs.  The results do not depend on it.
     """
 
     LOOKAHEAD = 3
@@ -265,24 +276,64 @@ class Derainer:
 
         self.streak_log: list[tuple[int, int]] = []   # (frame index, accepted streaks)
         self._run_cache: dict[tuple[int, int], np.ndarray] = {}
+        self._bufs: dict[str, np.ndarray] = {}   # frame-sized scratch arrays, reused frame after frame
+        self._pool: dict[tuple, list] = {}       # frame-sized arrays of finished frames, for the next ones
+        self._moves: dict[tuple[int, int], bool] = {}   # (j, n): warping unit j into n moves pixels
 
     # ----------------------------------------------------------------- helpers
     def _linearize(self, frame: np.ndarray) -> np.ndarray:
         if self.profile is not None:
             return self.profile.linearize(frame)
+        if frame.dtype == np.uint8:
+            out = self._take(frame.shape, np.float32)
+            np.copyto(out, frame)         # exact, as astype
+            return out
         return np.asarray(frame, dtype=np.float32)
+
+    def _moved(self, j: int, n: int, M: np.ndarray) -> bool:
+        """``M`` (unit j into unit n) displaces some pixel by ``WARP_MIN_SHIFT_PX`` or more."""
+        hit = self._moves.get((j, n))
+        if hit is None:
+            hit = self._moves[(j, n)] = transform_magnitude_px(M, self._shape[:2]) >= WARP_MIN_SHIFT_PX
+        return hit
+
+    def _take(self, shape: tuple, dtype) -> np.ndarray:
+        """A frame-sized array (contents undefined): one a finished frame gave back, or a new one."""
+        free = self._pool.get((tuple(shape), np.dtype(dtype)))
+        return free.pop() if free else np.empty(shape, dtype)
+
+    def _give(self, arrays) -> None:
+        """Hand arrays no longer referenced anywhere back to the pool (a few of each kind are kept)."""
+        for a in arrays:
+            if a.dtype == np.bool_:
+                a = a.view(np.uint8)
+            free = self._pool.setdefault((a.shape, a.dtype), [])
+            if len(free) < 4 and all(a.ctypes.data != b.ctypes.data for b in free):
+                free.append(a)
 
     def _to_uint8(self, lin: np.ndarray) -> np.ndarray:
         if self.profile is not None:
             return self.profile.delinearize(lin)
         return np.clip(np.rint(lin), 0, 255).astype(np.uint8)
 
-    def _aligned(self, j: int, n: int, what: str):
+    def _aligned(self, j: int, n: int, what: str, valid_name: str = "valid"):
         u = self._units[j]
         arr = getattr(u, what)
         if j == n:
             return arr, None
-        return warp_to(arr, self._tracker.between(j, n))
+        out = self._take(arr.shape, np.float32)
+        res = warp_to(arr, self._tracker.between(j, n), work=self._scratch("warp", arr.shape, np.float32), out=out,
+                      valid_out=self._scratch(valid_name, arr.shape[:2], np.bool_))
+        if res[0] is not out:
+            self._give([out])
+        return res
+
+    def _scratch(self, name: str, shape: tuple, dtype) -> np.ndarray:
+        """A frame-sized array for a temporary of one step (contents undefined), reused across frames."""
+        buf = self._bufs.get(name)
+        if buf is None or buf.shape != tuple(shape) or buf.dtype != dtype:
+            buf = self._bufs[name] = np.empty(shape, dtype)
+        return buf
 
     def _c_low(self) -> float:
         """Lower threshold of the hysteresis [gray levels]."""
@@ -313,15 +364,19 @@ class Derainer:
         self._n_inputs += 1
         lin = self._linearize(frame)
         lum = luminance(lin)
+        sub = np.ascontiguousarray(lum[::4, ::4])
         if self._n_units:
             last = self._units[self._n_units - 1]
             # a repeat: the mean absolute difference (on every 4th pixel) is below repeat_tol
-            if float(np.mean(np.abs(lum[::4, ::4] - last.lum[::4, ::4]))) < self.repeat_tol:
+            diff = np.subtract(sub, last.sub)
+            if float(np.mean(np.abs(diff, out=diff))) < self.repeat_tol:
                 last.inputs.append(idx)
+                if self.profile is None and frame.dtype == np.uint8:
+                    self._give([lin])
                 return []
         k = self._n_units
         self._n_units += 1
-        self._units[k] = _Unique(k=k, raw=frame, lin=lin, lum=lum, inputs=[idx])
+        self._units[k] = _Unique(k=k, raw=frame, lin=lin, lum=lum, inputs=[idx], sub=sub)
         self._tracker.add(lum)
         if k == 2:
             if self._noise_auto:
@@ -363,43 +418,48 @@ class Derainer:
         At the two ends of the stream both neighbours lie on one side; such a
         detection is weaker evidence and does not enter the dynamics.
         """
-        prev, v1 = self._aligned(i, n, "lum")
-        nxt, v2 = self._aligned(j, n, "lum")
-        valid = v1 if v2 is None else (v2 if v1 is None else v1 & v2)
+        prev, v1 = self._aligned(i, n, "lum", "valid_prev")
+        nxt, v2 = self._aligned(j, n, "lum", "valid_next")
+        # (the valid masks are scratch arrays: read in this detection only)
+        valid = v1 if v2 is None else (v2 if v1 is None else np.logical_and(v1, v2, out=v1))
         u = self._units[n]
         cur = u.lum
         import cv2
 
         # Elementwise tests with OpenCV (vectorised, no float64 and no
         # temporary per comparison); masks are 0/1 uint8 viewed as bool.
-        thr = cv2.subtract(cur, float(self.c))
+        shape = cur.shape
+        # the temporaries of this frame live in scratch arrays (no frame-sized allocations)
+        thr = cv2.subtract(cur, float(self.c), dst=self._scratch("thr", shape, np.float32))
         slack = None
         if valid is not None and self.registration_px > 0:
             # Warped neighbours carry a registration error of a fraction of a
             # pixel, i.e. an intensity error proportional to the local gradient:
             # thin bright lines would otherwise look like one-frame spikes.
-            slack = registration_slack(u.raw if (self.profile is None and u.raw.ndim == 2) else cur,
-                                       registration_px=self.registration_px)
-            thr = cv2.subtract(thr, slack, dtype=cv2.CV_32F)
-        rise = cv2.compare(prev, thr, cv2.CMP_LE)
-        fall = cv2.compare(nxt, thr, cv2.CMP_LE)
-        cand = cv2.bitwise_and(rise, fall)      # Eq. (19)
+            slack = _registration_slack(u.raw if (self.profile is None and u.raw.ndim == 2) else cur,
+                                        registration_px=self.registration_px, scratch=self._scratch)
+            thr = cv2.subtract(thr, slack, dst=thr, dtype=cv2.CV_32F)
+        rise = cv2.compare(prev, thr, cv2.CMP_LE, self._take(shape, np.uint8))
+        fall = cv2.compare(nxt, thr, cv2.CMP_LE, self._take(shape, np.uint8))
+        cand = cv2.bitwise_and(rise, fall, dst=self._scratch("cand", shape, np.uint8))      # Eq. (19)
         tol = self.tol
         if self._tol_auto:
             tol = 3.0 * math.sqrt(2.0) * self.noise_sigma
         apn = None
         if tol is not None:                     # ... with I_{n-1} = I_{n+1}
-            apn = cv2.absdiff(prev, nxt)
-            cand = cv2.bitwise_and(cand, cv2.compare(apn, float(tol), cv2.CMP_LE))
+            apn = cv2.absdiff(prev, nxt, dst=self._scratch("apn", shape, np.float32))
+            still = cv2.compare(apn, float(tol), cv2.CMP_LE, dst=self._scratch("still", shape, np.uint8))
+            cand = cv2.bitwise_and(cand, still, dst=cand)
         rise = np.bitwise_and(rise, 1, out=rise).view(bool)
         fall = np.bitwise_and(fall, 1, out=fall).view(bool)
         cand = np.bitwise_and(cand, 1, out=cand).view(bool)
         if valid is not None:
             cand &= valid
-        cand = _drop_isolated(cand, self.min_pixels)
-        b, streaks = photometric_filter(prev, cur, nxt, cand, beta_max=self.beta_max, noise_sigma=self.noise_sigma,
-                                        min_pixels=self.min_pixels)
-        n_streaks = int(np.count_nonzero(streaks.accepted))
+        cand = _drop_isolated(cand, self.min_pixels, scratch=self._scratch("near", shape, np.uint8))
+        labels_buf = self._scratch("labels", shape, np.int32)
+        b, n_streaks, b_idx = _accepted_mask(prev, cur, nxt, cand, beta_max=self.beta_max,
+                                             noise_sigma=self.noise_sigma, min_pixels=self.min_pixels,
+                                             labels_out=labels_buf, with_index=True)
         c_low = self._c_low()
         if c_low < self.c and cand.any():
             # Hysteresis: faint streaks and rims found whole.  A component that
@@ -407,24 +467,33 @@ class Derainer:
             # keeps the streak accepted at c.
             hyst = hysteresis_candidates(prev, cur, nxt, c=self.c, c_low=c_low, tol=tol, valid=valid,
                                          slack=None if slack is None else slack.astype(np.float32, copy=False))
-            b_low, fits_low = photometric_filter(prev, cur, nxt, hyst, beta_max=self.beta_max,
-                                                 noise_sigma=self.noise_sigma, min_pixels=self.min_pixels)
+            b_low, n_low = _accepted_mask(prev, cur, nxt, np.ascontiguousarray(hyst), beta_max=self.beta_max,
+                                          noise_sigma=self.noise_sigma, min_pixels=self.min_pixels,
+                                          labels_out=labels_buf)
             b |= b_low
-            n_streaks = max(n_streaks, int(np.count_nonzero(fits_low.accepted)))
+            b_idx = None
+            n_streaks = max(n_streaks, n_low)
+        warped = [a for a, v in ((prev, v1), (nxt, v2)) if v is not None]
         if not boundary:
             u.rise, u.fall = rise, fall
             if v1 is not None or v2 is not None:
                 u.aligned = (prev, nxt)   # read again by the removal of this frame
+                u.pooled = warped
         if self.motion_window_px > 0:
             k = self.motion_contrast
             moving = local_motion_mask(prev, cur, nxt, c=k * self.c, tol=k * 3.0 * math.sqrt(2.0) * self.noise_sigma,
-                                       window_px=self.motion_window_px, min_px=self.motion_min_px, ends_diff=apn)
+                                       window_px=self.motion_window_px, min_px=self.motion_min_px, ends_diff=apn,
+                                       work=(self._scratch("ends", shape, np.uint8),
+                                             self._scratch("ends01", shape, np.uint8)))
             u.moving = moving if moving.any() else None
         u.warped = v1 is not None or v2 is not None
         u.b = b
+        u.b_idx = b_idx
         u.n_streaks = n_streaks
         if not boundary:
-            self._dyn.update(b)
+            self._dyn.update(b, flat=b_idx)
+        else:   # nothing of this detection is kept
+            self._give(warped + [rise, fall])
 
     def _finish(self, n: int, last: int | None) -> list[DerainedFrame]:
         u = self._units[n]
@@ -444,7 +513,7 @@ class Derainer:
         if u.moving is not None:
             # Sec. 5.2 changes the rain pixels of rain regions only: dense local
             # scene motion inside a rain region is left alone
-            work = region & ~u.moving
+            work = np.greater(region, u.moving)     # region and not moving
         detected = u.b
         if top >= 2 and np.any(work):
             ids = [self._reflect(n + o, top) for o in range(-3, 4)]
@@ -453,7 +522,8 @@ class Derainer:
             free: list = []
             idx, vals = remove_window(window, u.b, work, c=self.c, runs=self.runs, tol=tol,
                                       grow_px=self.grow_px, beta_max=self.beta_max,
-                                      noise_sigma=self.noise_sigma, min_pixels=self.min_pixels, free_out=free)
+                                      noise_sigma=self.noise_sigma, min_pixels=self.min_pixels, free_out=free,
+                                      rain_idx=u.b_idx)
             if idx.size:
                 n_pix = replaced.size
                 out_frame.reshape(n_pix, -1)[idx] = self._to_uint8(vals).reshape(idx.size, -1)
@@ -475,10 +545,17 @@ class Derainer:
         results = [DerainedFrame(index=i, frame=out_frame, rain=replaced, detected=detected, region=region,
                                  field=field, repeat=(r > 0), b=u.b) for r, i in enumerate(u.inputs)]
         u.aligned = None
+        self._give(u.pooled)              # the warped neighbours
+        u.pooled = []
         # drop what is no longer needed (frames n-3 and older)
         old = n - self.LOOKAHEAD
         if old in self._units:
-            del self._units[old]
+            gone = self._units.pop(old)
+            for key in [key for key in self._moves if old in key]:
+                del self._moves[key]
+            self._give(gone.pooled + [a for a in (gone.rise, gone.fall) if a is not None])
+            if self.profile is None and gone.raw.dtype == np.uint8:
+                self._give([gone.lin])
         return results
 
 
@@ -497,20 +574,30 @@ def registration_slack(image: np.ndarray, *, registration_px: float) -> np.ndarr
     registration_px : float
         Registration error allowed [px].
     """
+    return _registration_slack(image, registration_px=registration_px,
+                               scratch=lambda name, shape, dtype: np.empty(shape, dtype))
+
+
+def _registration_slack(image, *, registration_px, scratch):
+    """:func:`registration_slack` with its arrays from ``scratch(name, shape, dtype)``."""
     import cv2
 
     scale = 0.125 * float(registration_px)
+    shape = image.shape[:2]
     if image.dtype == np.uint8:
-        dx, dy = cv2.spatialGradient(image)
-        return cv2.add(cv2.convertScaleAbs(dx, alpha=scale), cv2.convertScaleAbs(dy, alpha=scale))
+        dx, dy = cv2.spatialGradient(image, scratch("slack_dx", shape, np.int16), scratch("slack_dy", shape, np.int16))
+        ax = cv2.convertScaleAbs(dx, scratch("slack_ax", shape, np.uint8), alpha=scale)
+        ay = cv2.convertScaleAbs(dy, scratch("slack_ay", shape, np.uint8), alpha=scale)
+        return cv2.add(ax, ay, dst=scratch("slack", shape, np.uint8))
     img = np.asarray(image, np.float32)
-    gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3, scale=scale)
-    gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3, scale=scale)
-    return cv2.magnitude(gx, gy)
+    gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, scratch("slack_gx", shape, np.float32), ksize=3, scale=scale)
+    gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, scratch("slack_gy", shape, np.float32), ksize=3, scale=scale)
+    return cv2.magnitude(gx, gy, scratch("slack", shape, np.float32))
 
 
 def local_motion_mask(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, *, c: float, tol: float,
-                      window_px: int = 15, min_px: int = 30, ends_diff: np.ndarray | None = None) -> np.ndarray:
+                      window_px: int = 15, min_px: int = 30, ends_diff: np.ndarray | None = None,
+                      work: tuple | None = None) -> np.ndarray:
     """Pixels near local scene motion in frame n: a moving object is not rain, (M, N) bool.
 
     Rain changes a pixel for one frame (Sec. 4.3 [GargNayar2007]): a drop in
@@ -535,10 +622,12 @@ def local_motion_mask(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, *, c: 
         Sweeping pixels that make a window moving [px].
     ends_diff : (M, N) float32 array, optional
         ``|I_{n+1} - I_{n-1}|`` when already computed.
+    work : tuple of two (M, N) uint8 arrays, optional
+        Scratch space for the intermediates (overwritten).
     """
     import cv2
 
-    e, where = _sweeping(prev, cur, nxt, c=c, tol=tol, ends_diff=ends_diff)
+    e, where = _sweeping(prev, cur, nxt, c=c, tol=tol, ends_diff=ends_diff, work=work)
     n_e = where.size if where is not None else cv2.countNonZero(e)
     if n_e < int(min_px):   # no window can hold min_px sweeping pixels
         return np.zeros(e.shape, bool)
@@ -597,20 +686,21 @@ def _window_count_sparse(e, where, *, window_px, min_px, max_blocks=256):
     return out.view(bool)
 
 
-def _sweeping(prev, cur, nxt, *, c, tol, ends_diff=None):
+def _sweeping(prev, cur, nxt, *, c, tol, ends_diff=None, work=None):
     """0/255 uint8: |I_{n+1} - I_{n-1}| > tol and I_n more than c from both; and the flat
     indices of its pixels when they came cheaply (None otherwise)."""
     import cv2
 
     if ends_diff is None:
         ends_diff = cv2.absdiff(prev, nxt)
-    ends = cv2.compare(ends_diff, float(tol), cv2.CMP_GT)
+    ends_buf, bits_buf = (None, None) if work is None else work
+    ends = cv2.compare(ends_diff, float(tol), cv2.CMP_GT, ends_buf)
     if cv2.countNonZero(ends) > ends.size // 16:    # much motion: whole-frame operations
         near = cv2.min(cv2.absdiff(cur, prev), cv2.absdiff(cur, nxt))
         return cv2.bitwise_and(ends, cv2.compare(near, float(c), cv2.CMP_GT)), None
     # the ends differ at few pixels (a static scene): test I_n there only
     flat = ends.reshape(-1)
-    idx = np.flatnonzero(np.bitwise_and(flat, 1).view(bool))
+    idx = np.flatnonzero(np.bitwise_and(flat, 1, out=None if bits_buf is None else bits_buf.reshape(-1)).view(bool))
     cn = np.take(np.asarray(cur).reshape(-1), idx)
     pn = np.take(np.asarray(prev).reshape(-1), idx)
     nn = np.take(np.asarray(nxt).reshape(-1), idx)
@@ -620,13 +710,24 @@ def _sweeping(prev, cur, nxt, *, c, tol, ends_diff=None):
     return ends, idx[near]
 
 
-def _shift_nearest(mask: np.ndarray, dx: float, dy: float) -> np.ndarray:
-    """``out(x, y) = mask(x + dx, y + dy)`` to the nearest pixel, False outside (a slice copy)."""
+def _shift_nearest(mask: np.ndarray, dx: float, dy: float, out: np.ndarray | None = None) -> np.ndarray:
+    """``out(x, y) = mask(x + dx, y + dy)`` to the nearest pixel, False outside (a slice copy).
+
+    ``out`` (like ``mask``, not ``mask`` itself) receives the result when given.
+    """
     ix, iy = int(round(dx)), int(round(dy))
     if ix == 0 and iy == 0:
         return mask
     h, w = mask.shape
-    out = np.zeros_like(mask)
+    if out is None:
+        out = np.zeros_like(mask)
+    elif abs(ix) >= w or abs(iy) >= h:
+        out.fill(0)
+    else:   # only the uncovered strips need clearing
+        out[:max(0, -iy)] = 0
+        out[h - max(0, iy):] = 0
+        out[:, :max(0, -ix)] = 0
+        out[:, w - max(0, ix):] = 0
     if abs(ix) >= w or abs(iy) >= h:
         return out
     out[max(0, -iy):h - max(0, iy), max(0, -ix):w - max(0, ix)] = \
@@ -634,12 +735,13 @@ def _shift_nearest(mask: np.ndarray, dx: float, dy: float) -> np.ndarray:
     return out
 
 
-def _drop_isolated(mask: np.ndarray, min_pixels: int) -> np.ndarray:
+def _drop_isolated(mask: np.ndarray, min_pixels: int, scratch: np.ndarray | None = None) -> np.ndarray:
     """``mask`` without its isolated pixels (no 8-neighbour), when streaks need 2 pixels or more.
 
     Camera noise makes most candidates single pixels; removing them before
     the labelling changes no streak of ``min_pixels >= 2`` and saves most of
-    the per-pixel work.
+    the per-pixel work.  With ``scratch`` (a uint8 array of the mask's shape
+    for the dilation) ``mask`` is changed in place.
     """
     import cv2
 
@@ -648,8 +750,10 @@ def _drop_isolated(mask: np.ndarray, min_pixels: int) -> np.ndarray:
     ring = np.ones((3, 3), np.uint8)
     ring[1, 1] = 0
     # a neighbour within the 8 around: dilation by the ring (much cheaper than counting)
-    near = cv2.dilate(mask.view(np.uint8), ring, borderType=cv2.BORDER_CONSTANT, borderValue=0)
-    return mask & near.view(bool)
+    near = cv2.dilate(mask.view(np.uint8), ring, dst=scratch, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    if scratch is None:
+        return mask & near.view(bool)
+    return np.bitwise_and(mask, near.view(bool), out=mask)   # a scratch mask: in place
 
 
 #: Width of the coordinate maps handed to cv2.remap (which limits map sizes) [px].
@@ -718,7 +822,7 @@ class _StreamWindow:
         self.centre_lum = u.lum
         self.centre_lin = u.lin
         self._M = [d._tracker.between(j, n) for j in ids]
-        self._moved = [transform_magnitude_px(M, self.shape) >= WARP_MIN_SHIFT_PX for M in self._M]
+        self._moved = [d._moved(j, n, M) for j, M in zip(ids, self._M)]
         # frames n-1 and n+1 as the three-frame test saw them (None: not warped or not those frames)
         self._aligned = {}
         self._coord_cache = None
@@ -744,6 +848,15 @@ class _StreamWindow:
         out = cv2.remap(arr, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         ch = 1 if arr.ndim == 2 else arr.shape[2]
         return out.reshape(-1, ch)[:idx.size]
+
+    @property
+    def lin_is_lum(self) -> bool:
+        """``lin_at(k, idx)`` is ``lum_at(k, idx)[:, None]`` (gray video)."""
+        return all(u.lin is u.lum for u in self.units)
+
+    def scratch(self, name: str, shape: tuple, dtype) -> np.ndarray:
+        """Scratch space for the removal's temporaries (see :meth:`Derainer._scratch`)."""
+        return self.d._scratch(name, shape, dtype)
 
     def _coords(self, idx):
         """Columns and rows of the flat pixels ``idx`` as (R, 1024) float32 maps (padded)."""
@@ -774,27 +887,45 @@ class _StreamWindow:
             return self.lum_at(k, idx)[:, None]
         return self._at(unit.lin, k, idx)
 
-    def _carry(self, mask: np.ndarray, src: int, dst: int) -> np.ndarray:
-        """A mask of unit ``src`` in the coordinates of unit ``dst`` (nearest pixel, False outside)."""
+    def _carry(self, mask: np.ndarray, src: int, dst: int, out: np.ndarray | None = None) -> np.ndarray:
+        """A mask of unit ``src`` in the coordinates of unit ``dst`` (nearest pixel, False outside).
+
+        A translated mask is written into ``out`` when given (a bool array like
+        ``mask``, not ``mask`` itself); the mask itself is returned when it does not move.
+        """
         import cv2
 
         if src == dst:
             return mask
         M = self.d._tracker.between(src, dst)
-        if transform_magnitude_px(M, self.shape) < WARP_MIN_SHIFT_PX:
+        if not self.d._moved(src, dst, M):
             return mask
         if is_translation(M):
-            return _shift_nearest(mask, M[0, 2], M[1, 2])
+            return _shift_nearest(mask, M[0, 2], M[1, 2], out=out)
         h, w = self.shape
         return cv2.warpAffine(mask.view(np.uint8), M[:2], (w, h),
                               flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP).view(bool)
+
+    def _carry_or(self, acc: np.ndarray, mask: np.ndarray, src: int, dst: int) -> None:
+        """``acc |= self._carry(mask, src, dst)``, a translation without the intermediate mask."""
+        M = self.d._tracker.between(src, dst)
+        if src == dst or not self.d._moved(src, dst, M):
+            np.bitwise_or(acc, mask, out=acc)
+        elif is_translation(M):
+            ix, iy = int(round(M[0, 2])), int(round(M[1, 2]))
+            h, w = self.shape
+            if abs(ix) < w and abs(iy) < h:     # (else nothing of the mask lands inside)
+                part = acc[max(0, -iy):h - max(0, iy), max(0, -ix):w - max(0, ix)]
+                np.bitwise_or(part, mask[max(0, iy):h - max(0, -iy), max(0, ix):w - max(0, -ix)], out=part)
+        else:
+            np.bitwise_or(acc, self._carry(mask, src, dst), out=acc)
 
     def centre_steps(self, c: float) -> np.ndarray | None:
         """Frame n at least c above frame n-1 or n+1 (the one-sided tests of its Eq. (19)), or None."""
         u = self.d._units[self.n]
         if u.rise is None or u.fall is None:
             return None
-        return u.rise | u.fall
+        return np.bitwise_or(u.rise, u.fall, out=self.d._scratch("steps", self.shape, np.bool_))
 
     def run_candidates(self, c: float) -> np.ndarray:
         hit = self._runs_memo
@@ -813,20 +944,37 @@ class _StreamWindow:
         # coordinates of frame a: three of the five are shared with the next
         # frame's window, and only the result is carried into frame n.
         cache = self.d._run_cache
-        by_start: dict[int, np.ndarray] = {}
+        scratch = self.d._scratch
+        work = (scratch("run_count", self.shape, np.uint8), scratch("run_ok", self.shape, np.uint8))
+        by_start: dict[int, list] = {}
         for a, e in RUNS:
             ja, je = self.n + a, self.n + e
             m = cache.get((ja, je))
             if m is None:
-                m = cache[(ja, je)] = run_pair(near[a + 2].rise, self._carry(near[e + 2].fall, je, ja))
-            acc = by_start.get(ja)
-            by_start[ja] = m.copy() if acc is None else np.bitwise_or(acc, m, out=acc)
-        pre = None
-        for ja, m in by_start.items():      # one carry per starting frame (copies of our own)
-            m = self._carry(m, ja, self.n)
-            pre = m if pre is None else np.bitwise_or(pre, m, out=pre)
+                fall = self._carry(near[e + 2].fall, je, ja, out=scratch("carry", self.shape, np.bool_))
+                m = cache[(ja, je)] = run_pair(near[a + 2].rise, fall, work=work,
+                                               out=self.d._take(self.shape, np.uint8))
+            by_start.setdefault(ja, []).append(m)
+        # one carry per starting frame; the unions live in scratch arrays (the
+        # cached masks are only read), and so does the result (read within
+        # this frame's removal only)
+        pre = scratch("run_pre", self.shape, np.bool_)
+        first = True
+        for k, (ja, ms) in enumerate(by_start.items()):
+            m = ms[0]
+            if len(ms) > 1:
+                m = np.bitwise_or(ms[0], ms[1], out=scratch(f"run_start{k}", self.shape, np.bool_))
+                for extra in ms[2:]:
+                    np.bitwise_or(m, extra, out=m)
+            if first:
+                m = self._carry(m, ja, self.n, out=pre)
+                if m is not pre:
+                    np.copyto(pre, m)
+                first = False
+            else:
+                self._carry_or(pre, m, ja, self.n)
         for key in [key for key in cache if key[0] < self.n - 1]:
-            del cache[key]
+            self.d._give([cache.pop(key)])
         return pre
 
 

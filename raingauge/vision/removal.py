@@ -74,21 +74,27 @@ def run_prefilter(rises: list, falls: list) -> np.ndarray:
     return pre
 
 
-def run_pair(rise: np.ndarray, fall: np.ndarray) -> np.ndarray:
+def run_pair(rise: np.ndarray, fall: np.ndarray, *, work: tuple | None = None,
+             out: np.ndarray | None = None) -> np.ndarray:
     """Pixels that may lie in the run [a, e]: a rise at a, a fall at e, and two such neighbours (3 x 3).
 
     Parameters
     ----------
     rise, fall : (M, N) bool arrays
         ``I_a - I_{a-1} >= c`` and ``I_e - I_{e+1} >= c``.
+    work : tuple of two (M, N) uint8 arrays, optional
+        Scratch space for the intermediates (overwritten).
+    out : (M, N) uint8 array, optional
+        Receives the result (returned as a bool view); neither ``rise`` nor ``fall``.
     """
     import cv2
 
+    count_buf, ok_buf = (None, None) if work is None else work
     # 0/1 uint8 throughout (bool views); a 3 x 3 count is at most 9, so it fits in uint8
-    run = cv2.bitwise_and(rise.view(np.uint8), fall.view(np.uint8))
-    count = cv2.boxFilter(run, cv2.CV_8U, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
-    ok = cv2.compare(count, 3, cv2.CMP_GE)
-    run = cv2.bitwise_and(run, ok)
+    run = cv2.bitwise_and(rise.view(np.uint8), fall.view(np.uint8), dst=out)
+    count = cv2.boxFilter(run, cv2.CV_8U, (3, 3), count_buf, normalize=False, borderType=cv2.BORDER_CONSTANT)
+    ok = cv2.compare(count, 3, cv2.CMP_GE, ok_buf)
+    run = cv2.bitwise_and(run, ok, dst=run)
     return run.view(bool)
 
 
@@ -183,12 +189,20 @@ def runs_in_values(v: np.ndarray, *, c: float, tol: float | None = None, c_inner
     return hit, before[hit], after[hit]
 
 
+def _work(window, name, shape, dtype):
+    """A scratch array from the window when it keeps some (frame loops), else None (allocate)."""
+    scratch = getattr(window, "scratch", None)
+    return None if scratch is None else scratch(name, shape, dtype)
+
+
 class ArrayWindow:
     """Seven frames n-3 .. n+3 already aligned to frame n, as full arrays.
 
     The interface :func:`remove_window` reads: ``shape``, ``centre_lum``,
     ``lum_at(k, idx)``, ``lin_at(k, idx)``, ``run_candidates(c)`` and,
-    optionally, ``centre_steps(c)`` (None: no restriction).
+    optionally, ``centre_steps(c)`` (None: no restriction) and
+    ``scratch(name, shape, dtype)`` (frame-sized arrays for temporaries,
+    reused from frame to frame; without it they are allocated).
     """
 
     def __init__(self, frames, lum):
@@ -226,12 +240,13 @@ class ArrayWindow:
 def remove_window(window, rain: np.ndarray, region: np.ndarray, *, c: float, runs: bool = True,
                   tol: float | None = None, grow_px: int = 1, grow_threshold: float | None = None,
                   beta_max: float | None = None, noise_sigma: float = 1.0, min_pixels: int = 5,
-                  near_px: int = 0, c_inner: float | None = None, free_out: list | None = None
-                  ) -> tuple[np.ndarray, np.ndarray]:
+                  near_px: int = 0, c_inner: float | None = None, free_out: list | None = None,
+                  rain_idx: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The rules of Sec. 5.2 on a window of frames; see :func:`remove_rain`.
 
     ``free_out`` (a list) receives the free-standing runs of frame n found
     by :func:`free_runs`, ``(flat, before, after)``, for the detection to share.
+    ``rain_idx``: the flat indices of the pixels of ``rain`` (increasing), when known.
 
     Returns
     -------
@@ -242,28 +257,50 @@ def remove_window(window, rain: np.ndarray, region: np.ndarray, *, c: float, run
     """
     import cv2
 
-    single = rain & region
-    idx = np.flatnonzero(single.ravel())
+    single = _work(window, "rw_single", rain.shape, np.bool_)
+    single = rain & region if single is None else np.logical_and(rain, region, out=single)
+    if rain_idx is not None and region.dtype == np.bool_:
+        idx = rain_idx[region.ravel()[rain_idx]]
+    else:
+        idx = np.flatnonzero(single.ravel())
     examine = None
+    # frames n-1 and n+1 at idx, kept for the background when they are the
+    # frames themselves (gray video: lin_at is lum_at)
+    keep = getattr(window, "lin_is_lum", False)
+    v2 = v4 = None
     if tol is not None and idx.size:
         # (I_{n-1} + I_{n+1}) / 2 is the background only where the two agree;
         # elsewhere a drop hit a neighbouring frame too (left to the run tests)
-        unsteady = np.abs(window.lum_at(2, idx) - window.lum_at(4, idx)) > tol
+        v2, v4 = window.lum_at(2, idx), window.lum_at(4, idx)
+        unsteady = np.abs(v2 - v4) > tol
         if unsteady.any():
             examine = idx[unsteady]
             single.ravel()[examine] = False
             idx = idx[~unsteady]
+            v2, v4 = v2[~unsteady], v4[~unsteady]
     if grow_px > 0 and idx.size:
         k = 2 * int(grow_px) + 1
-        near = cv2.dilate(single.view(np.uint8), np.ones((k, k), np.uint8)).view(bool) & region & ~single
+        near = cv2.dilate(single.view(np.uint8), np.ones((k, k), np.uint8),
+                          _work(window, "rw_near", single.shape, np.uint8)).view(bool)
+        np.logical_and(near, region, out=near)
+        np.greater(near, single, out=near)          # and not single
         nidx = np.flatnonzero(near.ravel())
         thr = 0.5 * c if grow_threshold is None else grow_threshold
-        change = window.centre_lum.ravel()[nidx] - 0.5 * (window.lum_at(2, nidx) + window.lum_at(4, nidx))
-        grown = nidx[change > thr]
+        n2, n4 = window.lum_at(2, nidx), window.lum_at(4, nidx)
+        change = window.centre_lum.ravel()[nidx] - 0.5 * (n2 + n4)
+        up = change > thr
+        grown = nidx[up]
         if grown.size:
             single.ravel()[grown] = True
             idx = np.concatenate([idx, grown])
-    values = 0.5 * (window.lin_at(2, idx) + window.lin_at(4, idx)) if idx.size else None
+            if v2 is not None:
+                v2, v4 = np.concatenate([v2, n2[up]]), np.concatenate([v4, n4[up]])
+    if not idx.size:
+        values = None
+    elif keep and v2 is not None:
+        values = (0.5 * (v2 + v4))[:, None]
+    else:
+        values = 0.5 * (window.lin_at(2, idx) + window.lin_at(4, idx))
     out_idx, out_vals = [idx], [values]
     if runs and np.any(region):
         flat, before, after = multi_frame_hits(window, single, c=c, where=region, tol=tol, beta_max=beta_max,
@@ -352,12 +389,14 @@ def multi_frame_hits(window, rain: np.ndarray, *, c: float, where: np.ndarray | 
     empty = np.zeros(0, np.int64)
     found = [(empty, empty, empty)]
     done = rain
+    known: dict = {}      # rows of the 7-frame values already gathered at ``flat``
     # next to local scene motion (a window that allows no free-standing runs)
     # a moving texture passes the relaxed test as easily as a crossing drop
     if ((near_px > 0 and rain.any()) or examine is not None) and getattr(window, "free_runs", True):
         if near_px > 0:
             k = 2 * int(near_px) + 1
-            near = cv2.dilate(rain.view(np.uint8), np.ones((k, k), np.uint8)).view(bool)
+            near = cv2.dilate(rain.view(np.uint8), np.ones((k, k), np.uint8),
+                              _work(window, "mfh_near", rain.shape, np.uint8)).view(bool)
             # the centre frame c above both unaffected frames: a run that starts
             # at n rises there, one that ends at n falls there (the centre
             # frame's own one-sided tests of Eq. 19); only those pixels are
@@ -367,7 +406,8 @@ def multi_frame_hits(window, rain: np.ndarray, *, c: float, where: np.ndarray | 
                 near &= steps
         flat = empty
         if near_px > 0:
-            near &= where & ~rain
+            np.logical_and(near, where, out=near)
+            np.greater(near, rain, out=near)        # and not rain
             flat = np.flatnonzero(near.ravel())
             if flat.size:
                 # frames n-1 and n+1 first: a run that starts at n has frame
@@ -380,20 +420,27 @@ def multi_frame_hits(window, rain: np.ndarray, *, c: float, where: np.ndarray | 
                 v4 = window.lum_at(4, flat)
                 ok = ((v3 - v2 >= c32) & (v4 - v2 >= ci)) | ((v3 - v4 >= c32) & (v2 - v4 >= ci))
                 flat = flat[ok]
+                known = {2: v2[ok], 3: v3[ok], 4: v4[ok]}     # (read again below)
         if examine is not None:
             extra = np.flatnonzero(examine.ravel()) if examine.dtype == bool else np.asarray(examine, np.int64)
             ok = where.ravel()[extra] & ~rain.ravel()[extra]
             if near_px > 0:
                 ok &= ~near.ravel()[extra]
             flat = np.sort(np.concatenate([flat, extra[ok]]))
+            known = {}
         if flat.size:
-            v = np.stack([window.centre_lum.ravel()[flat] if kk == 3 else window.lum_at(kk, flat) for kk in range(7)])
+            v = np.stack([known[kk] if kk in known else
+                          (window.centre_lum.ravel()[flat] if kk == 3 else window.lum_at(kk, flat)) for kk in range(7)])
             hit, before, after = runs_in_values(v, c=c, tol=tol, c_inner=0.5 * c if c_inner is None else c_inner,
                                                 steady=True)
             flat = flat[hit]
             if flat.size:
                 found.append((flat, before, after))
-                done = rain.copy()
+                done = _work(window, "mfh_done", rain.shape, np.bool_)
+                if done is None:
+                    done = rain.copy()
+                else:
+                    np.copyto(done, rain)
                 done.ravel()[flat] = True
     if free is None:
         free = free_runs(window, done, c=c, where=where, tol=tol, beta_max=beta_max, noise_sigma=noise_sigma,
@@ -436,9 +483,13 @@ def free_runs(window, rain: np.ndarray, *, c: float, where: np.ndarray | None = 
         Flat indices of the pixels and the indices (0-6) of the unaffected frames.
     """
     empty = np.zeros(0, np.int64)
-    sel = window.run_candidates(c) & ~rain
+    pre = window.run_candidates(c)
+    if pre.dtype == np.bool_ and rain.dtype == np.bool_:     # pre and not rain, without a temporary
+        sel = np.greater(pre, rain, out=_work(window, "fr_sel", rain.shape, np.bool_))
+    else:
+        sel = pre & ~rain
     if where is not None:
-        sel &= where
+        np.logical_and(sel, where, out=sel)
     flat = np.flatnonzero(sel.ravel())
     if not flat.size:
         return empty, empty, empty
@@ -446,20 +497,13 @@ def free_runs(window, rain: np.ndarray, *, c: float, where: np.ndarray | None = 
     hit, before, after = runs_in_values(v, c=c, tol=tol)
     flat, v = flat[hit], v[:, hit]
     if flat.size and beta_max is not None:
-        from raingauge.vision.photometric import photometric_filter
+        from raingauge.vision.photometric import _accept_pixels
 
+        # the runs' streaks with the unaffected frames as background, on the
+        # run pixels alone (no frame-sized images or labelling)
         cols = np.arange(flat.size)
-        centre = window.centre_lum
-        # only the run pixels are read: no need to fill the rest
-        bg_before = np.empty_like(centre)
-        bg_after = np.empty_like(centre)
-        bg_before.ravel()[flat] = v[before, cols]
-        bg_after.ravel()[flat] = v[after, cols]
-        m = np.zeros(centre.shape, bool)
-        m.ravel()[flat] = True
-        ok, _ = photometric_filter(bg_before, centre, bg_after, m, beta_max=beta_max,
-                                   noise_sigma=noise_sigma, min_pixels=min_pixels)
-        keep = ok.ravel()[flat]
+        keep = _accept_pixels(flat, v[before, cols], v[3], v[after, cols], window.shape, beta_max=beta_max,
+                              noise_sigma=noise_sigma, min_pixels=min_pixels)
         flat, before, after = flat[keep], before[keep], after[keep]
     return flat.astype(np.int64), before.astype(np.int64), after.astype(np.int64)
 
