@@ -54,10 +54,15 @@ the rate the hidden drops may carry.
 
 Notes
 -----
-The drop brightness E_r is not known in advance; it is the 90th percentile of
-E_b + 4 Q / (pi w'^2) over the recent law-abiding streaks (the sharpest of
-them: defocus only dims a streak, Eq. 24).  Until ten such streaks were seen,
-the photometric focus test is not applied.
+The drop brightness E_r is not known in advance (unless given); it is read
+from E_b + 4 Q / (pi w'^2) over the recent law-abiding streaks (defocus only
+dims a streak, Eq. 24): a percentile of the samples the focus test keeps,
+referenced to the same percentile of the sample volume model's measured focus
+(:func:`drop_brightness_dn`).  Until ten such streaks were seen, the
+photometric focus test is not applied.  Each streak is measured against the
+change beside it (the flanks of
+:func:`raingauge.gauge.streaks.measure_streak_table`): in rain, wide faint
+drops near the camera over the neighbouring frames shift the change under it.
 """
 
 from __future__ import annotations
@@ -583,7 +588,7 @@ class RainGauge:
         if not self._pending:
             return
         if self.defocus_model == "uniform" and self._brightness_known(10):
-            # the drop brightness E_r: the sharpest of the law-abiding streaks (defocus only dims)
+            # the drop brightness E_r from the law-abiding streaks (defocus only dims)
             e_r = self._drop_brightness()
         else:
             e_r = float("nan")
