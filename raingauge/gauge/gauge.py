@@ -905,10 +905,18 @@ class RainGauge:
         (:func:`drop_brightness_dn`)."""
         if self.fixed_drop_brightness_dn is not None:
             return self.fixed_drop_brightness_dn
+        q_ref = self._brightness_q()
+        # the same samples give the same estimate: computed once per new sample set (the
+        # last sample is alive in the deque, so its identity marks the set)
+        key = (len(self._brightness), id(self._brightness[-1]) if self._brightness else None, q_ref)
+        cached = getattr(self, "_brightness_cache", None)
+        if cached is not None and cached[0] == key:
+            return cached[1]
         pairs = np.asarray(self._brightness, dtype=np.float64).reshape(-1, 2)
-        return drop_brightness_dn(pairs[:, 1], pairs[:, 0], q_min=self.volume.q_min,
-                                  q_ref=self._brightness_q(),
-                                  percentile=BRIGHTNESS_PERCENTILE)
+        e_r = drop_brightness_dn(pairs[:, 1], pairs[:, 0], q_min=self.volume.q_min, q_ref=q_ref,
+                                 percentile=BRIGHTNESS_PERCENTILE)
+        self._brightness_cache = (key, e_r)
+        return e_r
 
     def _half_gap(self, steps: float) -> float:
         """Half the unobserved frame periods before a frame ``steps`` periods after the last
