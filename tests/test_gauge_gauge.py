@@ -196,7 +196,8 @@ def test_low_contrast_interval_says_so():
     true_rate = truth["rain_rate_mm_h"]
     lo, hi = rec["rain_rate_ci95_mm_h"]
     assert "low_contrast" in rec["quality"]
-    assert lo <= true_rate <= hi and hi > 3.0 * rec["rain_rate_mm_h"]
+    # a Poisson interval over hundreds of drops would end ~25 % above the reading
+    assert lo <= true_rate <= hi and hi > 2.0 * rec["rain_rate_mm_h"]
     assert rec["min_detectable_diameter_mm"] > 1.0
     # a dark background in the same noise: every measurable size is seen, no widening
     frames, truth = sim.render_clip(cam, seconds=1.0, rain_rate_mm_h=30.0, background="uniform:40",

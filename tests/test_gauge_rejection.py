@@ -168,3 +168,22 @@ def test_change_noise_is_the_sensor_noise_without_the_streaks():
     cur[:, ::50] += 40.0                       # streak columns
     est = change_noise_dn(frames[0], cur, frames[2])
     assert est == pytest.approx(2.0 * math.sqrt(1.5), rel=0.05)
+
+
+def test_tolerance_is_capped_for_poorly_measured_streaks():
+    """A streak measured too poorly to place within a factor of two of the law says nothing
+    about it: the tolerance stops at the cap (faint moving texture would pass any wider
+    test), and a streak twice too slow fails however large its errors."""
+    from raingauge.gauge.rejection import DEFAULT_TOLERANCE_CAP, law_tolerance, passes_velocity_law
+
+    a = 0.8e-3
+    v = float(fall_velocity(2 * a, model="gunn_kinzer"))
+    w, m = 2 * CAM.focal_length_px * a / 2.5, CAM.focal_length_px * v * CAM.exposure_s / 2.5
+    tight = law_tolerance(a, w, m, model="gunn_kinzer", width_sigma_px=0.1, motion_sigma_px=0.3)
+    loose = law_tolerance(a, w, m, model="gunn_kinzer", width_sigma_px=5.0, motion_sigma_px=20.0)
+    assert tight < DEFAULT_TOLERANCE_CAP
+    assert loose == pytest.approx(DEFAULT_TOLERANCE_CAP)
+    assert not passes_velocity_law(a, 0.45 * v, w, 0.45 * m, model="gunn_kinzer", width_sigma_px=5.0,
+                                   motion_sigma_px=20.0)
+    assert passes_velocity_law(a, 0.7 * v, w, 0.7 * m, model="gunn_kinzer", width_sigma_px=5.0,
+                               motion_sigma_px=20.0)

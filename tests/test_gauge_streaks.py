@@ -378,3 +378,25 @@ def test_flank_baseline_keeps_a_wide_defocused_streak():
     tab = measure_streak_table(change, labels, stats, [big], noise_sigma=0.8)
     q = exposure_area_px2(tab["plateau"][0], tab["motion"][0], tab["width_apparent"][0])
     assert q / (contrast * math.pi * a_i ** 2) == pytest.approx(1.0, abs=0.15)
+
+
+def test_hysteresis_keeps_a_faint_streak_whole():
+    """A streak whose change hovers at the threshold (a drop over a bright, varying
+    background, Eq. 17) passes c only in patches: plain detection cuts it short or in
+    pieces, hysteresis along the fall keeps its whole length; isolated noise does not grow."""
+    rng = np.random.default_rng(2)
+    shape = (120, 60)
+    img = capsule_change(shape, x0=30.0, y0=20.0, dx=0.0, dy=70.0, width=3.0, contrast=1.0)
+    img = img / img.max()
+    yy = np.arange(shape[0])[:, None]
+    level = 3.2 + 1.2 * np.sin(yy / 2.5)                      # 2.0-4.4 DN along the streak
+    change = (img * level + rng.normal(0, 0.5, shape)).astype(np.float32)
+    found = {}
+    for grow in (1.0, 0.5):
+        labels, stats = detect_streaks(change, c=3.0, grow=grow, merge_gap_px=0)
+        found[grow] = stats[1:][stats[1:, 4] > 0]
+    assert len(found[0.5]) == 1 and found[0.5][0, 3] >= 70       # whole: 70 px of motion + its width
+    assert len(found[1.0]) > 2 and found[1.0][:, 3].max() < 0.5 * 70
+    noise = rng.normal(0, 0.5, shape).astype(np.float32)
+    _, stats = detect_streaks(noise, c=3.0, grow=0.5)
+    assert not np.any(stats[1:, 4] > 0)

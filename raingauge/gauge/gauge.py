@@ -63,6 +63,11 @@ photometric focus test is not applied.  Each streak is measured against the
 change beside it (the flanks of
 :func:`raingauge.gauge.streaks.measure_streak_table`): in rain, wide faint
 drops near the camera over the neighbouring frames shift the change under it.
+In frames whose drops have little contrast (``low_contrast``) and whose scene
+is still, streaks are detected with hysteresis along the fall
+(:func:`raingauge.gauge.streaks.detect_streaks`), so that a streak passing the
+threshold only in patches is measured whole; the sample volume of those frames
+says so (:class:`raingauge.gauge.volume.SampleVolume` ``grow``).
 """
 
 from __future__ import annotations
@@ -93,6 +98,7 @@ from raingauge.gauge.streaks import (
 from raingauge.gauge.volume import (
     BRIGHTNESS_PERCENTILE,
     DEFOCUS_MODELS,
+    DETECTION_GROW,
     EDGE_MARGIN_PX,
     SampleVolume,
     background_histogram,
@@ -166,17 +172,17 @@ QUALITY_FLAGS: dict[str, str] = {
 _VOLUMES: dict = {}
 
 
-def _sample_volume(profile, velocity_model: str, defocus_model: str) -> SampleVolume:
+def _sample_volume(profile, velocity_model: str, defocus_model: str, grow: float = DETECTION_GROW) -> SampleVolume:
     """The sample volume of a profile (computed once per profile and options)."""
     try:
-        key = (profile, velocity_model, defocus_model)
+        key = (profile, velocity_model, defocus_model, grow)
         hash(key)
     except TypeError:
-        return SampleVolume(profile, velocity_model=velocity_model, defocus_model=defocus_model)
+        return SampleVolume(profile, velocity_model=velocity_model, defocus_model=defocus_model, grow=grow)
     if key not in _VOLUMES:
         if len(_VOLUMES) > 16:
             _VOLUMES.clear()
-        _VOLUMES[key] = SampleVolume(profile, velocity_model=velocity_model, defocus_model=defocus_model)
+        _VOLUMES[key] = SampleVolume(profile, velocity_model=velocity_model, defocus_model=defocus_model, grow=grow)
     return _VOLUMES[key]
 
 
@@ -351,6 +357,10 @@ class RainGauge:
         self.overlap_correction = bool(overlap_correction)
         self._shape = "uniform" if defocus_model == "uniform" else "chord"
         self.volume = volume if volume is not None else _sample_volume(profile, velocity_model, defocus_model)
+        # frames whose drops stand out clearly, or with scene motion, are detected without
+        # hysteresis, and sampled by the volume that says so
+        self._volume_still = (volume if volume is not None or self.volume.grow >= 1.0
+                              else _sample_volume(profile, velocity_model, defocus_model, grow=1.0))
         self.keep_drops = keep_drops
         if drop_brightness_dn is not None and not (math.isfinite(drop_brightness_dn) and drop_brightness_dn > 0):
             raise ValueError(f"drop_brightness_dn must be a positive number of gray levels, got {drop_brightness_dn!r}")
@@ -539,7 +549,12 @@ class RainGauge:
         self._frame_noise_change = max(change_noise_dn(prev, cur, nxt), self.noise_change)
         self._noise_log.append(self._frame_noise_change / math.sqrt(1.5))
         slope = float(np.median(self._slopes)) if len(self._slopes) >= 5 else 0.0
-        labels, stats = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope)
+        # hysteresis only where the drops' contrast is low (their streaks pass c in patches)
+        # and the scene is still (moving texture would grow into streaks)
+        grow_here = "low_contrast" in flags and "scene_motion" not in flags
+        vol = self.volume if grow_here else self._volume_still
+        labels, stats = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope,
+                                       grow=vol.grow)
         rejected = 0
         counted = []
         if np.any(stats[1:, 4] > 0):
@@ -575,6 +590,7 @@ class RainGauge:
         # visible set this frame's sample volume (raingauge.gauge.volume.SampleVolume.kappa)
         entry = [t, flags, rejected, self._last_mean_bg, background_histogram(prev)]
         for c in prepared:
+            c["vol"] = vol
             c["bg_hist"] = entry[4]
             c["noise_dn"] = self._frame_noise_change / math.sqrt(1.5)
         self._frames.append(entry)
@@ -840,29 +856,30 @@ class RainGauge:
             self._prune_tracks(prepared[0]["t"])
         for c in prepared:
             t, w_app, mot, dx, xc, yc = c["t"], c["w_app"], c["mot"], c["dx"], c["xc"], c["yc"]
+            vol = c.get("vol", self.volume)
             if c["photo"] is not None:
                 ib, total = c["photo"]
                 q = float(photometric_focus(total, w_app, e_r - ib)) if np.isfinite(e_r) else 1.0
-                if not q >= self.volume.q_min:
+                if not q >= vol.q_min:
                     rejected += 1
                     self.rejections["defocus_photometric"] += 1
                     continue
                 w_true = w_app * math.sqrt(min(q, 1.0))
                 a0 = w_true * z0 / (2 * f)
-                a = w_true * float(self.volume.depth_m(a0)) / (2 * f)
+                a = w_true * float(vol.depth_m(a0)) / (2 * f)
             else:
-                a = float(self.volume.true_radius_m(w_app * z0 / (2 * f)))
+                a = float(vol.true_radius_m(w_app * z0 / (2 * f)))
             frame_weights = self._frame_weights(c, e_r)
-            kap = float(self.volume.kappa(a, weights=frame_weights, noise_dn=c.get("noise_dn")))
+            kap = float(vol.kappa(a, weights=frame_weights, noise_dn=c.get("noise_dn")))
             area = float(whole_streak_area_px2((dx, mot), w_app, prof.shape)) / self._frame_interval
-            if not kap >= self._kappa_floor(frame_weights) or area <= 0:
+            if not kap >= self._kappa_floor(frame_weights, vol) or area <= 0:
                 rejected += 1
                 self.rejections["no_volume"] += 1
                 continue
             # a drop whose streak touched another one is lost to the merge: count the
             # isolated ones up by the chance of isolation at this streak's size and frame
             area *= 1.0 - c["p_overlap"]
-            z = float(self.volume.depth_m(a))
+            z = float(vol.depth_m(a))
             v = mot * z / (f * T)
             weight = 1.0 / (kap * area)
             # the same drop seen in an earlier frame continues its track (one drop for the
@@ -926,14 +943,15 @@ class RainGauge:
         cap = max(int(round(MAX_FILLED_GAP_S / self._frame_interval)), 1)
         return 0.5 * (min(steps, cap) - 1)
 
-    def _kappa_floor(self, weights) -> float:
+    def _kappa_floor(self, weights, volume=None) -> float:
         """:data:`KAPPA_FLOOR_REL` times the largest kappa over the sizes, for a frame's
         contrast weights (None: the volume's nominal contrast) [m^3/px^2]."""
-        key = None if weights is None else id(weights)
+        vol = self.volume if volume is None else volume
+        key = (None if weights is None else id(weights), id(vol))
         cached = getattr(self, "_kappa_floor_cache", None)
         if cached is None or cached[0] != key or cached[1] is not weights:
             grid = np.geomspace(0.05e-3, 5e-3, 120)
-            peak = float(np.nanmax(self.volume.kappa(grid, weights=weights)))
+            peak = float(np.nanmax(vol.kappa(grid, weights=weights)))
             self._kappa_floor_cache = (key, weights, KAPPA_FLOOR_REL * peak if peak > 0 else math.inf)
         return self._kappa_floor_cache[2]
 

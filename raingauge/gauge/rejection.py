@@ -87,6 +87,9 @@ __all__ = [
 DEFAULT_TOLERANCE_FLOOR = 0.08
 #: Number of standard errors of the measurement allowed.
 DEFAULT_K_SIGMA = 3.0
+
+#: Widest tolerance of the velocity law on |ln(v / V(a))| (a factor of 2 in speed) [-].
+DEFAULT_TOLERANCE_CAP = 0.7
 #: Typical standard error of a fitted streak width [px] (see tests/test_gauge_streaks.py).
 DEFAULT_WIDTH_SIGMA_PX = 0.25
 #: Typical standard error of a fitted streak motion [px].
@@ -173,8 +176,10 @@ def ratio_sigma(radius_m, width_px, motion_px, *, width_sigma_px=DEFAULT_WIDTH_S
 
 def law_tolerance(radius_m, width_px, motion_px, *, floor: float = DEFAULT_TOLERANCE_FLOOR,
                   k_sigma: float = DEFAULT_K_SIGMA, model: str = "paper", width_sigma_px=None,
-                  motion_sigma_px=None, **kw) -> np.ndarray:
-    """Tolerance on |r| [-]: sqrt(floor^2 + (k sigma_r)^2) with sigma_r of :func:`ratio_sigma`.
+                  motion_sigma_px=None, cap: float = DEFAULT_TOLERANCE_CAP, **kw) -> np.ndarray:
+    """Tolerance on |r| [-]: sqrt(floor^2 + (k sigma_r)^2) with sigma_r of :func:`ratio_sigma`,
+    at most ``cap``: a streak measured too poorly to place within a factor e^cap of the
+    law says nothing about it (faint moving texture would pass any wider test).
 
     Parameters
     ----------
@@ -192,7 +197,7 @@ def law_tolerance(radius_m, width_px, motion_px, *, floor: float = DEFAULT_TOLER
     ws = DEFAULT_WIDTH_SIGMA_PX if width_sigma_px is None else width_sigma_px
     ms = DEFAULT_MOTION_SIGMA_PX if motion_sigma_px is None else motion_sigma_px
     sig = ratio_sigma(radius_m, width_px, motion_px, width_sigma_px=ws, motion_sigma_px=ms, model=model, **kw)
-    return np.sqrt(floor ** 2 + (k_sigma * sig) ** 2)
+    return np.minimum(np.sqrt(floor ** 2 + (k_sigma * sig) ** 2), cap)
 
 
 def passes_velocity_law(radius_m, velocity_m_s, width_px, motion_px, *, model: str = "paper",

@@ -669,7 +669,8 @@ def fall_kernel(length_px: int, slope: float = 0.0) -> np.ndarray:
 
 
 def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min_pixels: int = 6,
-                   merge_gap_px: float = 6.0, slope: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+                   merge_gap_px: float = 6.0, slope: float = 0.0,
+                   grow: float = 1.0, grow_rows: int = 6) -> tuple[np.ndarray, np.ndarray]:
     """Label candidate streaks: Eq. (19) on a change image smoothed along the fall.
 
     Parameters
@@ -691,6 +692,14 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
     slope : float
         Direction of the fall in the image, dx/dy [px/px] (wind slants the
         streaks); the smoothing follows it.
+    grow : float
+        Hysteresis: a streak also takes the pixels of the smoothed spike at or above
+        ``grow`` c within ``grow_rows`` of one of its pixels at c in the same column
+        (1: none).  A faint streak over a varying background (Eq. 17: its change
+        beta (E_r - E_b) follows E_b) passes c only in patches; grown along the fall
+        it keeps its whole length, which its speed is read from.
+    grow_rows : int
+        How far the growth reaches, along the column only [px].
 
     Returns
     -------
@@ -721,6 +730,7 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
         else:
             s = spike
         mask = cv2.compare(s, float(c) * n_s, cv2.CMP_GE)
+        low = cv2.compare(s, float(c * grow) * n_s, cv2.CMP_GE) if grow < 1.0 else None
     else:
         if spike.dtype != np.float32:
             spike = spike.astype(np.float32)
@@ -731,6 +741,10 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
         else:
             s = cv2.filter2D(spike, -1, fall_kernel(int(smooth_px), slope), borderType=cv2.BORDER_REFLECT)
         mask = cv2.compare(s, float(c), cv2.CMP_GE)
+        low = cv2.compare(s, float(c * grow), cv2.CMP_GE) if grow < 1.0 else None
+    if low is not None:
+        reach = cv2.dilate(mask, np.ones((2 * int(grow_rows) + 1, 1), np.uint8))
+        mask = cv2.bitwise_or(mask, cv2.bitwise_and(low, reach))
     # 16-bit labels halve the labelling's cost; safe while there are fewer pixels than labels
     ltype = cv2.CV_16U if cv2.countNonZero(mask) < 65000 else cv2.CV_32S
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8, ltype=ltype)

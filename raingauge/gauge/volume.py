@@ -70,6 +70,7 @@ from raingauge.gauge.rejection import (
 )
 
 __all__ = [
+    "DETECTION_GROW",
     "SampleVolume",
     "pass_probability",
     "effective_area_rate_px2_s",
@@ -83,6 +84,10 @@ __all__ = [
 
 #: How defocus widens a streak (see :func:`pass_probability`).
 DEFOCUS_MODELS = ("uniform", "pillbox")
+
+#: Hysteresis of the gauge's streak detection: a streak grows along the fall from its
+#: pixels at the threshold c into the ones at this fraction of c [-].
+DETECTION_GROW = 0.5
 
 #: Streaks closer than this to the frame edge count as clipped [px].
 EDGE_MARGIN_PX = 2.0
@@ -134,7 +139,7 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
                      blur_sigma_px: float = DEFAULT_BLUR_SIGMA_PX, defocus_model: str = "uniform",
                      q_min: float = DEFAULT_Q_MIN, contrast_dn=DEFAULT_CONTRAST_DN,
                      noise_sigma_dn: float | None = None, detection_threshold_dn: float | None = None,
-                     smooth_px: int = 5) -> dict:
+                     smooth_px: int = 5, grow: float = DETECTION_GROW) -> dict:
     """Probability that a drop of radius a at depth z is detected and passes the defocus test.
 
     P = P_det P_size P_law P_focus: the detection of Eq. (19) for the streak's change
@@ -184,6 +189,9 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
         of the profile's noise).
     smooth_px : int
         Rows of the along-fall smoothing before detection.
+    grow : float
+        Hysteresis of the detection (:func:`raingauge.gauge.streaks.detect_streaks`): a
+        streak is found where it reaches c and measured over where it reaches grow c.
 
     Returns
     -------
@@ -251,7 +259,8 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
             s_q = np.where(np.isfinite(sw) & np.isfinite(rel), s_q, np.nan)
     p_det = np.where(finite_c, detection_probability(change, w_app, threshold_dn=c, noise_sigma_dn=noise,
                                                      smooth_px=smooth_px, length_px=motion + w_app), 1.0)
-    margin = np.where(finite_c, detection_margin(change, w_app, threshold_dn=c, noise_sigma_dn=noise,
+    # the streak's extent is taken at the hysteresis threshold grow c (detect_streaks)
+    margin = np.where(finite_c, detection_margin(change, w_app, threshold_dn=grow * c, noise_sigma_dn=noise,
                                                  smooth_px=smooth_px), np.inf)
     p_size = sizing_probability(2.0 * a_img, margin, np.where(finite_c, row_snr(change, w_app, noise_change), np.inf))
     p = p * p_det * p_size
@@ -399,6 +408,8 @@ class SampleVolume:
         Contrast grid of the table [gray levels] (default 1-255, 16 log-spaced points).
     noise_sigma_dn, detection_threshold_dn : float, optional
         Noise and Eq. (19) threshold c [gray levels] (default: the profile's, as the gauge uses them).
+    grow : float
+        Hysteresis of the detection (see :func:`pass_probability`) [-].
     noise_factors : array, optional
         Noise grid of the table, in units of ``noise_sigma_dn`` (rain's own flicker raises
         the noise a streak is measured in, Eq. 27 [GargNayar2007]).
@@ -444,6 +455,7 @@ class SampleVolume:
     blur_variance_factor: float = 1.0
     defocus_model: str = "uniform"
     q_min: float = DEFAULT_Q_MIN
+    grow: float = DETECTION_GROW
     radii_m: np.ndarray = field(default_factory=lambda: np.geomspace(0.1e-3, 4.0e-3, 60))
     min_width_px: float = 1.0
     contrast_dn: float = DEFAULT_CONTRAST_DN
@@ -482,7 +494,7 @@ class SampleVolume:
                                    k_sigma=self.k_sigma, blur_variance_factor=self.blur_variance_factor,
                                    defocus_model=self.defocus_model, q_min=self.q_min,
                                    contrast_dn=cgrid[None, :, None], noise_sigma_dn=self.noises_dn[:, None, None],
-                                   detection_threshold_dn=self.detection_threshold_dn)
+                                   detection_threshold_dn=self.detection_threshold_dn, grow=self.grow)
             wt = res["p"] * (z / f) ** 2 * dz
             k = wt.sum(axis=-1)                                  # (n_noises, n_contrasts + 1)
             if self.defocus_model == "uniform":
@@ -689,7 +701,7 @@ class SampleVolume:
                              k_sigma=self.k_sigma, blur_variance_factor=self.blur_variance_factor,
                              defocus_model=self.defocus_model, q_min=self.q_min,
                              contrast_dn=self.contrast_dn, noise_sigma_dn=self.noise_sigma_dn,
-                             detection_threshold_dn=self.detection_threshold_dn)["p"]
+                             detection_threshold_dn=self.detection_threshold_dn, grow=self.grow)["p"]
         ok = np.nonzero(p >= p_min)[0]
         if ok.size == 0:
             return (z0, z0)
