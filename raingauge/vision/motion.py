@@ -239,7 +239,8 @@ def _translate_cubic(src: np.ndarray, dx: float, dy: float, *, a: float = -0.75,
     used to align neighbours for the three-frame test) at a fraction of its
     cost and with an exact fraction (OpenCV quantises it to 1/32 px).
     Registration uses a = -0.5, which moves a ramp exactly.  ``work`` (float32,
-    the shape of ``src``) holds the intermediate when given, ``out`` the result.
+    the shape of ``src``) holds the intermediate of a shift of two pixels or
+    more when given, ``out`` the result.
     """
     import cv2
 
@@ -250,6 +251,22 @@ def _translate_cubic(src: np.ndarray, dx: float, dy: float, *, a: float = -0.75,
                               flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
     kx = _cubic_weights(dx - ix, a)
     ky = _cubic_weights(dy - iy, a)
+    if -2 <= ix <= 1 and -2 <= iy <= 1:
+        # a shift of less than two pixels: the whole pixels go into the anchor,
+        # dst(x) = sum_j k[j] src(x + i + j - 1) in one pass, and only the
+        # uncovered side is replicated afterwards (from the first covered
+        # row / column, as the slice below would)
+        out = cv2.sepFilter2D(src, cv2.CV_32F, kx, ky, dst=out, anchor=(1 - ix, 1 - iy),
+                              borderType=cv2.BORDER_REPLICATE)
+        if ix < 0:
+            out[:, :-ix] = out[:, -ix:1 - ix]
+        elif ix > 0:
+            out[:, w - ix:] = out[:, w - ix - 1:w - ix]
+        if iy < 0:
+            out[:-iy] = out[-iy:1 - iy]
+        elif iy > 0:
+            out[h - iy:] = out[h - iy - 1:h - iy]
+        return out
     # the fraction: dst(x) = sum_j k[j] src(x + j - 1), anchor 1 puts the weights on offsets -1..2
     frac = cv2.sepFilter2D(src, cv2.CV_32F, kx, ky, dst=work, anchor=(1, 1), borderType=cv2.BORDER_REPLICATE)
     # the whole pixels: a slice, the uncovered side replicated

@@ -669,10 +669,9 @@ def _accepted_mask(prev, cur, nxt, mask, *, beta_max, noise_sigma=1.0, min_pixel
     if not (math.isfinite(beta_max) and beta_max > 0):
         raise ValueError(f"beta_max must be a positive number, got {beta_max!r}")
     m8 = mask.view(np.uint8)
-    if labels_out is None:
-        n, lab = cv2.connectedComponents(m8, connectivity=8, ltype=cv2.CV_32S)
-    else:
-        n, lab = cv2.connectedComponents(m8, labels_out, 8, cv2.CV_32S)
+    # Wu's scan (SAUF) is the quickest on sparse candidate masks; the verdicts
+    # do not depend on how the streaks are numbered
+    n, lab = cv2.connectedComponentsWithAlgorithm(m8, 8, cv2.CV_32S, cv2.CCL_WU, labels_out)
     idx = np.flatnonzero(mask.ravel())
     idx, lj, keep_ids = _big_streaks(idx, lab.ravel()[idx], n - 1, min_pixels)
     out = np.zeros(mask.shape, bool)

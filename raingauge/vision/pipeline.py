@@ -279,6 +279,7 @@ class Derainer:
         self._bufs: dict[str, np.ndarray] = {}   # frame-sized scratch arrays, reused frame after frame
         self._pool: dict[tuple, list] = {}       # frame-sized arrays of finished frames, for the next ones
         self._moves: dict[tuple[int, int], bool] = {}   # (j, n): warping unit j into n moves pixels
+        self._levels: dict[tuple, tuple | None] = {}    # thresholds of the gray-level tests
 
     # ----------------------------------------------------------------- helpers
     def _linearize(self, frame: np.ndarray) -> np.ndarray:
@@ -334,6 +335,38 @@ class Derainer:
         if buf is None or buf.shape != tuple(shape) or buf.dtype != dtype:
             buf = self._bufs[name] = np.empty(shape, dtype)
         return buf
+
+    def _gray_level_tests(self, tol, tol_motion):
+        """The float32 threshold tests of :meth:`_detect` as tests on whole gray levels, or None.
+
+        For frames whose luminance is their 8-bit value, ``I_{n-1} <= I_n - c``
+        (float32) holds exactly when I_n - I_{n-1} >= d, ``|I_{n-1} - I_{n+1}|
+        <= tol`` when the gray-level difference is at most t_still, and
+        ``> tol_motion`` when it is at least t_ends: (d, t_still, t_ends), each
+        found by running the float32 test itself on the 256 gray levels.  None
+        when the step is not the same for every level (a c within rounding of
+        a whole number).
+        """
+        key = (self.c, tol, tol_motion)
+        hit = self._levels.get(key, False)
+        if hit is not False:
+            return hit
+        import cv2
+
+        g = np.arange(256, dtype=np.float32).reshape(1, 256)
+        thr = cv2.subtract(g, float(self.c))
+        # I_{n-1} = p passes for I_n = q when p <= floor(thr[q]): a step of q - floor(thr[q])
+        steps = np.arange(256) - np.floor(thr[0].astype(np.float64)).astype(np.int64)
+        res = None
+        if np.all(steps == steps[0]) and 1 <= steps[0] <= 255:
+            still = cv2.compare(g, float(tol if tol is not None else 0.0), cv2.CMP_LE)[0] > 0
+            ends = cv2.compare(g, float(tol_motion), cv2.CMP_GT)[0] > 0
+            n_still, n_ends = int(still.sum()), int(ends.sum())
+            # monotone in the level (a prefix and a suffix): thresholds
+            if still[:n_still].all() and ends[256 - n_ends:].all():
+                res = (int(steps[0]), n_still - 1, 256 - n_ends)
+        self._levels[key] = res
+        return res
 
     def _c_low(self) -> float:
         """Lower threshold of the hysteresis [gray levels]."""
@@ -429,30 +462,60 @@ class Derainer:
         # Elementwise tests with OpenCV (vectorised, no float64 and no
         # temporary per comparison); masks are 0/1 uint8 viewed as bool.
         shape = cur.shape
-        # the temporaries of this frame live in scratch arrays (no frame-sized allocations)
-        thr = cv2.subtract(cur, float(self.c), dst=self._scratch("thr", shape, np.float32))
-        slack = None
-        if valid is not None and self.registration_px > 0:
-            # Warped neighbours carry a registration error of a fraction of a
-            # pixel, i.e. an intensity error proportional to the local gradient:
-            # thin bright lines would otherwise look like one-frame spikes.
-            slack = _registration_slack(u.raw if (self.profile is None and u.raw.ndim == 2) else cur,
-                                        registration_px=self.registration_px, scratch=self._scratch)
-            thr = cv2.subtract(thr, slack, dst=thr, dtype=cv2.CV_32F)
-        rise = cv2.compare(prev, thr, cv2.CMP_LE, self._take(shape, np.uint8))
-        fall = cv2.compare(nxt, thr, cv2.CMP_LE, self._take(shape, np.uint8))
-        cand = cv2.bitwise_and(rise, fall, dst=self._scratch("cand", shape, np.uint8))      # Eq. (19)
         tol = self.tol
         if self._tol_auto:
             tol = 3.0 * math.sqrt(2.0) * self.noise_sigma
-        apn = None
-        if tol is not None:                     # ... with I_{n-1} = I_{n+1}
-            apn = cv2.absdiff(prev, nxt, dst=self._scratch("apn", shape, np.float32))
-            still = cv2.compare(apn, float(tol), cv2.CMP_LE, dst=self._scratch("still", shape, np.uint8))
-            cand = cv2.bitwise_and(cand, still, dst=cand)
-        rise = np.bitwise_and(rise, 1, out=rise).view(bool)
-        fall = np.bitwise_and(fall, 1, out=fall).view(bool)
-        cand = np.bitwise_and(cand, 1, out=cand).view(bool)
+        k_motion = self.motion_contrast
+        tol_motion = k_motion * 3.0 * math.sqrt(2.0) * self.noise_sigma
+        apn = ends = None
+        levels = slack = None
+        if v1 is None and v2 is None and self.profile is None and u.raw.ndim == 2:
+            # the luminance of the three frames is their 8-bit values (a gray
+            # video, no warp): the same tests on whole gray levels (see _gray_level_tests)
+            levels = self._gray_level_tests(tol, tol_motion)
+        if levels is not None:
+            d, t_still, t_ends = levels
+            p8, q8, n8 = self._units[i].raw, u.raw, self._units[j].raw
+            step = self._scratch("step8", shape, np.uint8)
+            # I_n - I_{n-1} >= c  <=>  the saturated difference of the gray levels reaches d
+            rise = np.greater_equal(cv2.subtract(q8, p8, dst=step), d, out=self._take(shape, np.uint8).view(bool))
+            fall = np.greater_equal(cv2.subtract(q8, n8, dst=step), d, out=self._take(shape, np.uint8).view(bool))
+            cand = np.bitwise_and(rise, fall, out=self._scratch("cand", shape, np.uint8).view(bool))    # Eq. (19)
+            apn8 = cv2.absdiff(p8, n8, dst=self._scratch("apn8", shape, np.uint8))
+            if tol is not None:                 # ... with I_{n-1} = I_{n+1}
+                if t_still < 0:
+                    cand.fill(False)
+                elif t_still < 255:
+                    still = np.less_equal(apn8, t_still, out=self._scratch("still", shape, np.uint8).view(bool))
+                    np.bitwise_and(cand, still, out=cand)
+            if self.motion_window_px > 0:
+                ends = self._scratch("ends", shape, np.uint8)
+                if t_ends <= 0:
+                    ends.fill(255)
+                elif t_ends > 255:
+                    ends.fill(0)
+                else:
+                    cv2.compare(apn8, t_ends - 1, cv2.CMP_GT, ends)
+        else:
+            # the temporaries of this frame live in scratch arrays (no frame-sized allocations)
+            thr = cv2.subtract(cur, float(self.c), dst=self._scratch("thr", shape, np.float32))
+            slack = None
+            if valid is not None and self.registration_px > 0:
+                # Warped neighbours carry a registration error of a fraction of a
+                # pixel, i.e. an intensity error proportional to the local gradient:
+                # thin bright lines would otherwise look like one-frame spikes.
+                slack = _registration_slack(u.raw if (self.profile is None and u.raw.ndim == 2) else cur,
+                                            registration_px=self.registration_px, scratch=self._scratch)
+                thr = cv2.subtract(thr, slack, dst=thr, dtype=cv2.CV_32F)
+            # (0/1 bool results written straight into uint8 arrays of the pool)
+            rise = np.less_equal(prev, thr, out=self._take(shape, np.uint8).view(bool))
+            fall = np.less_equal(nxt, thr, out=self._take(shape, np.uint8).view(bool))
+            cand = np.bitwise_and(rise, fall, out=self._scratch("cand", shape, np.uint8).view(bool))    # Eq. (19)
+            if tol is not None:                     # ... with I_{n-1} = I_{n+1}
+                apn = cv2.absdiff(prev, nxt, dst=self._scratch("apn", shape, np.float32))
+                still = cv2.compare(apn, float(tol), cv2.CMP_LE, dst=self._scratch("still", shape, np.uint8))
+                c8 = cand.view(np.uint8)
+                cv2.bitwise_and(c8, still, dst=c8)      # 0/1 and 0/255: 0/1
         if valid is not None:
             cand &= valid
         cand = _drop_isolated(cand, self.min_pixels, scratch=self._scratch("near", shape, np.uint8))
@@ -481,10 +544,10 @@ class Derainer:
                 u.pooled = warped
         if self.motion_window_px > 0:
             k = self.motion_contrast
-            moving = local_motion_mask(prev, cur, nxt, c=k * self.c, tol=k * 3.0 * math.sqrt(2.0) * self.noise_sigma,
+            moving = local_motion_mask(prev, cur, nxt, c=k * self.c, tol=tol_motion,
                                        window_px=self.motion_window_px, min_px=self.motion_min_px, ends_diff=apn,
                                        work=(self._scratch("ends", shape, np.uint8),
-                                             self._scratch("ends01", shape, np.uint8)))
+                                             self._scratch("ends01", shape, np.uint8)), ends=ends)
             u.moving = moving if moving.any() else None
         u.warped = v1 is not None or v2 is not None
         u.b = b
@@ -597,7 +660,7 @@ def _registration_slack(image, *, registration_px, scratch):
 
 def local_motion_mask(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, *, c: float, tol: float,
                       window_px: int = 15, min_px: int = 30, ends_diff: np.ndarray | None = None,
-                      work: tuple | None = None) -> np.ndarray:
+                      work: tuple | None = None, ends: np.ndarray | None = None) -> np.ndarray:
     """Pixels near local scene motion in frame n: a moving object is not rain, (M, N) bool.
 
     Rain changes a pixel for one frame (Sec. 4.3 [GargNayar2007]): a drop in
@@ -624,10 +687,12 @@ def local_motion_mask(prev: np.ndarray, cur: np.ndarray, nxt: np.ndarray, *, c: 
         ``|I_{n+1} - I_{n-1}|`` when already computed.
     work : tuple of two (M, N) uint8 arrays, optional
         Scratch space for the intermediates (overwritten).
+    ends : (M, N) uint8 array, optional
+        ``|I_{n+1} - I_{n-1}| > tol`` as 0 / 255 when already computed (overwritten).
     """
     import cv2
 
-    e, where = _sweeping(prev, cur, nxt, c=c, tol=tol, ends_diff=ends_diff, work=work)
+    e, where = _sweeping(prev, cur, nxt, c=c, tol=tol, ends_diff=ends_diff, work=work, ends=ends)
     n_e = where.size if where is not None else cv2.countNonZero(e)
     if n_e < int(min_px):   # no window can hold min_px sweeping pixels
         return np.zeros(e.shape, bool)
@@ -686,15 +751,17 @@ def _window_count_sparse(e, where, *, window_px, min_px, max_blocks=256):
     return out.view(bool)
 
 
-def _sweeping(prev, cur, nxt, *, c, tol, ends_diff=None, work=None):
+def _sweeping(prev, cur, nxt, *, c, tol, ends_diff=None, work=None, ends=None):
     """0/255 uint8: |I_{n+1} - I_{n-1}| > tol and I_n more than c from both; and the flat
-    indices of its pixels when they came cheaply (None otherwise)."""
+    indices of its pixels when they came cheaply (None otherwise).  ``ends``: the
+    first test, 0 / 255, when already computed (it becomes the result)."""
     import cv2
 
-    if ends_diff is None:
-        ends_diff = cv2.absdiff(prev, nxt)
     ends_buf, bits_buf = (None, None) if work is None else work
-    ends = cv2.compare(ends_diff, float(tol), cv2.CMP_GT, ends_buf)
+    if ends is None:
+        if ends_diff is None:
+            ends_diff = cv2.absdiff(prev, nxt)
+        ends = cv2.compare(ends_diff, float(tol), cv2.CMP_GT, ends_buf)
     if cv2.countNonZero(ends) > ends.size // 16:    # much motion: whole-frame operations
         near = cv2.min(cv2.absdiff(cur, prev), cv2.absdiff(cur, nxt))
         return cv2.bitwise_and(ends, cv2.compare(near, float(c), cv2.CMP_GT)), None
@@ -703,9 +770,11 @@ def _sweeping(prev, cur, nxt, *, c, tol, ends_diff=None, work=None):
     idx = np.flatnonzero(np.bitwise_and(flat, 1, out=None if bits_buf is None else bits_buf.reshape(-1)).view(bool))
     cn = np.take(np.asarray(cur).reshape(-1), idx)
     pn = np.take(np.asarray(prev).reshape(-1), idx)
-    nn = np.take(np.asarray(nxt).reshape(-1), idx)
     c32 = np.float32(c)
-    near = (np.abs(cn - pn) > c32) & (np.abs(cn - nn) > c32)
+    near = np.abs(cn - pn) > c32
+    on = np.flatnonzero(near)        # I_{n+1} read where I_n is already c from I_{n-1}
+    nn = np.take(np.asarray(nxt).reshape(-1), np.take(idx, on))
+    near[on] = np.abs(np.take(cn, on) - nn) > c32
     flat[idx[~near]] = 0
     return ends, idx[near]
 

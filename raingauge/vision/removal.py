@@ -92,10 +92,39 @@ def run_pair(rise: np.ndarray, fall: np.ndarray, *, work: tuple | None = None,
     count_buf, ok_buf = (None, None) if work is None else work
     # 0/1 uint8 throughout (bool views); a 3 x 3 count is at most 9, so it fits in uint8
     run = cv2.bitwise_and(rise.view(np.uint8), fall.view(np.uint8), dst=out)
-    count = cv2.boxFilter(run, cv2.CV_8U, (3, 3), count_buf, normalize=False, borderType=cv2.BORDER_CONSTANT)
+    count = _count3x3(run, count_buf, ok_buf)
     ok = cv2.compare(count, 3, cv2.CMP_GE, ok_buf)
     run = cv2.bitwise_and(run, ok, dst=run)
     return run.view(bool)
+
+
+def _count3x3(x: np.ndarray, out: np.ndarray | None = None, tmp: np.ndarray | None = None) -> np.ndarray:
+    """Sum of the 3 x 3 neighbourhood of every pixel of a 0/1 uint8 image, zeros outside, uint8.
+
+    The unnormalised 3 x 3 box filter with a zero border, as sums of shifted
+    rows and columns (exact: the sums are at most 9).  ``out`` receives the
+    result and ``tmp`` the row sums when given (uint8 arrays like ``x``).
+    """
+    import cv2
+
+    h, w = x.shape
+    if h < 3 or w < 3:
+        return cv2.boxFilter(x, cv2.CV_8U, (3, 3), out, normalize=False, borderType=cv2.BORDER_CONSTANT)
+    if out is None:
+        out = np.empty_like(x)
+    if tmp is None:
+        tmp = np.empty_like(x)
+    mid = tmp[:, 1:-1]
+    cv2.add(x[:, :-2], x[:, 2:], dst=mid)
+    cv2.add(mid, x[:, 1:-1], dst=mid)
+    np.add(x[:, 0], x[:, 1], out=tmp[:, 0])
+    np.add(x[:, -1], x[:, -2], out=tmp[:, -1])
+    body = out[1:-1]
+    cv2.add(tmp[:-2], tmp[2:], dst=body)
+    cv2.add(body, tmp[1:-1], dst=body)
+    np.add(tmp[0], tmp[1], out=out[0])
+    np.add(tmp[-1], tmp[-2], out=out[-1])
+    return out
 
 
 def find_runs(lum, *, c: float, where: np.ndarray | None = None, tol: float | None = None
@@ -429,25 +458,30 @@ def multi_frame_hits(window, rain: np.ndarray, *, c: float, where: np.ndarray | 
             flat = np.sort(np.concatenate([flat, extra[ok]]))
             known = {}
         if flat.size:
-            v = np.stack([known[kk] if kk in known else
-                          (window.centre_lum.ravel()[flat] if kk == 3 else window.lum_at(kk, flat)) for kk in range(7)])
-            hit, before, after = runs_in_values(v, c=c, tol=tol, c_inner=0.5 * c if c_inner is None else c_inner,
-                                                steady=True)
+            c_in = 0.5 * c if c_inner is None else c_inner
+            v, pos = _run_rows(window, flat, c=c, c_in=c_in, tol=tol, known=known)
+            flat = flat[pos]
+            hit, before, after = runs_in_values(v, c=c, tol=tol, c_inner=c_in, steady=True)
             flat = flat[hit]
             if flat.size:
                 found.append((flat, before, after))
-                done = _work(window, "mfh_done", rain.shape, np.bool_)
-                if done is None:
-                    done = rain.copy()
-                else:
-                    np.copyto(done, rain)
-                done.ravel()[flat] = True
+    hits = found[-1][0]     # increasing flat indices (the first test's, or none)
     if free is None:
+        if hits.size:
+            done = _work(window, "mfh_done", rain.shape, np.bool_)
+            if done is None:
+                done = rain.copy()
+            else:
+                np.copyto(done, rain)
+            done.ravel()[hits] = True
         free = free_runs(window, done, c=c, where=where, tol=tol, beta_max=beta_max, noise_sigma=noise_sigma,
                          min_pixels=min_pixels)
     else:
         flat, before, after = free
-        keep = where.ravel()[flat] & ~done.ravel()[flat]
+        keep = where.ravel()[flat] & ~rain.ravel()[flat]
+        if hits.size and flat.size:   # ... and not found by the first test
+            at = np.minimum(np.searchsorted(hits, flat), hits.size - 1)
+            keep &= hits[at] != flat
         free = (flat[keep], before[keep], after[keep])
     if free_out is not None:
         free_out.append(free)
@@ -493,7 +527,8 @@ def free_runs(window, rain: np.ndarray, *, c: float, where: np.ndarray | None = 
     flat = np.flatnonzero(sel.ravel())
     if not flat.size:
         return empty, empty, empty
-    v = np.stack([window.centre_lum.ravel()[flat] if k == 3 else window.lum_at(k, flat) for k in range(7)])
+    v, pos = _run_rows(window, flat, c=c, c_in=c, tol=tol)
+    flat = flat[pos]
     hit, before, after = runs_in_values(v, c=c, tol=tol)
     flat, v = flat[hit], v[:, hit]
     if flat.size and beta_max is not None:
@@ -506,6 +541,47 @@ def free_runs(window, rain: np.ndarray, *, c: float, where: np.ndarray | None = 
                               noise_sigma=noise_sigma, min_pixels=min_pixels)
         flat, before, after = flat[keep], before[keep], after[keep]
     return flat.astype(np.int64), before.astype(np.int64), after.astype(np.int64)
+
+
+def _run_rows(window, flat, *, c, c_in, tol=None, known=None):
+    """The (7, Q) luminance of frames n-3 .. n+3 at the pixels of ``flat`` that may hold a run, and their
+    positions in ``flat``: the rows :func:`runs_in_values` reads, without sampling every frame everywhere.
+
+    Every run [a, e] holds frame n, which must be ``c`` above both unaffected
+    frames a-1 and e+1, and its other frames ``c_in`` above them (and the two
+    within ``tol`` of each other); frames n-2 .. n+2 alone rule out most
+    pixels.  A difference of two values rounds no higher than that of a larger
+    and a smaller value, so no pixel with a run is left out.  ``known`` maps
+    frame offsets 0-6 to rows already gathered at ``flat``.
+    """
+    known = known or {}
+
+    def row(k, at):
+        if k in known:
+            return known[k]
+        return window.centre_lum.ravel()[at] if k == 3 else window.lum_at(k, at)
+
+    v1, v2, v3, v4, v5 = (row(k, flat) for k in (1, 2, 3, 4, 5))
+    # (the tests below run in the type of the stacked rows)
+    dt = np.result_type(v1, v2, v3, v4, v5)
+    v1, v2, v3, v4, v5 = (x.astype(dt, copy=False) for x in (v1, v2, v3, v4, v5))
+    d31, d34, d32, d35 = v3 - v1 >= c, v3 - v4 >= c, v3 - v2 >= c, v3 - v5 >= c
+    t14 = t25 = t15 = True
+    if tol is not None:
+        t14, t25, t15 = np.abs(v1 - v4) <= tol, np.abs(v2 - v5) <= tol, np.abs(v1 - v5) <= tol
+    may = d31 & d34 & (v2 - v1 >= c_in) & (v2 - v4 >= c_in) & t14         # [n-1, n]
+    may |= d32 & d35 & (v4 - v2 >= c_in) & (v4 - v5 >= c_in) & t25        # [n, n+1]
+    may |= d34 & (v1 - v4 >= c_in) & (v2 - v4 >= c_in)                    # [n-2, n]
+    may |= (d31 & d35 & (v2 - v1 >= c_in) & (v2 - v5 >= c_in) & (v4 - v1 >= c_in)
+            & (v4 - v5 >= c_in) & t15)                                      # [n-1, n+1]
+    may |= d32 & (v4 - v2 >= c_in) & (v5 - v2 >= c_in)                    # [n, n+2]
+    pos = np.flatnonzero(may)
+    sub = flat[pos]
+    v0, v6 = window.lum_at(0, sub), window.lum_at(6, sub)
+    if np.result_type(dt, v0, v6) != dt:     # frames n-3, n+3 of a wider type: every pixel, as it is
+        pos = np.arange(flat.size)
+        return np.stack([row(k, flat) for k in range(7)]), pos
+    return np.stack([v0, v1[pos], v2[pos], v3[pos], v4[pos], v5[pos], v6]), pos
 
 
 def _run_values(window, flat, before, after):
