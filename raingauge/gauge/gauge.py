@@ -79,6 +79,7 @@ import numpy as np
 
 from raingauge.errors import InputError
 from raingauge.gauge import products as _products
+from raingauge.gauge.completeness import CompletenessProbe
 from raingauge.gauge.rejection import (
     exposure_area_px2,
     passes_blur,
@@ -323,6 +324,11 @@ class RainGauge:
     drop_brightness_dn : float, optional
         The drop brightness E_r [gray levels] when it is known (a calibrated scene);
         default: estimated from the streaks as they come (:func:`drop_brightness_dn`).
+    completeness_probe : bool
+        Measure the share of the modelled sample volume the gauge achieves in this scene with
+        artificial drops injected into its frames, and correct kappa(a) by it
+        (:class:`raingauge.gauge.completeness.CompletenessProbe`; uniform defocus model only).
+        Frames are kept back until it has its first estimate (at most until the next record).
     """
 
     def __init__(self, profile, *, window_s: float = 60.0, step_s: float = 10.0,
@@ -330,7 +336,7 @@ class RainGauge:
                  detection_threshold_dn: float | None = None, smooth_px: int = 5, min_drops: int = 20,
                  keep_drops: bool = False, defocus_model: str = "uniform",
                  overlap_correction: bool = True, volume: SampleVolume | None = None,
-                 drop_brightness_dn: float | None = None):
+                 drop_brightness_dn: float | None = None, completeness_probe: bool = True):
         from raingauge.physics.drops import FALL_VELOCITY_MODELS
 
         if velocity_model not in FALL_VELOCITY_MODELS:
@@ -362,6 +368,9 @@ class RainGauge:
         self._volume_still = (volume if volume is not None or self.volume.grow >= 1.0
                               else _sample_volume(profile, velocity_model, defocus_model, grow=1.0))
         self.keep_drops = keep_drops
+        #: the completeness probe (None when off or for the pillbox defocus model)
+        self.probe = (CompletenessProbe(profile, self.volume, velocity_model)
+                      if completeness_probe and defocus_model == "uniform" else None)
         if drop_brightness_dn is not None and not (math.isfinite(drop_brightness_dn) and drop_brightness_dn > 0):
             raise ValueError(f"drop_brightness_dn must be a positive number of gray levels, got {drop_brightness_dn!r}")
         self.fixed_drop_brightness_dn = None if drop_brightness_dn is None else float(drop_brightness_dn)
@@ -557,9 +566,11 @@ class RainGauge:
                                        grow=vol.grow)
         rejected = 0
         counted = []
-        if np.any(stats[1:, 4] > 0):
-            ref_bg = None
-            contrast = None
+        ref_bg = None
+        contrast = None
+        probing = (self.probe is not None and self._brightness_known(MATURE_BRIGHTNESS_SAMPLES) and
+                   self.probe.due(self._n_in))
+        if np.any(stats[1:, 4] > 0) or probing:
             if self.defocus_model == "uniform" and self._brightness_known(10):
                 # Eq. (18): a streak changes a pixel by beta (E_r - I_b); dividing by the local
                 # contrast removes the background's texture from the streak's profile
@@ -579,6 +590,7 @@ class RainGauge:
                     contrast = (e_r, c_ref)
                 else:
                     ref_bg = None
+        if np.any(stats[1:, 4] > 0):
             if self.defocus_model == "uniform":
                 prepared, rejected = self._measure_table(labels, stats, change, prev, cur, t, ref_bg=ref_bg,
                                                          contrast=contrast)
@@ -596,8 +608,71 @@ class RainGauge:
         self._frames.append(entry)
         self._pending.append((entry, prepared))
         self._last_t = t
-        if self.defocus_model != "uniform" or self._brightness_known(MATURE_BRIGHTNESS_SAMPLES):
+        if probing:
+            # clear of the streaks already there (not of single noise pixels)
+            long_ = stats[:, 3] >= 6
+            long_[0] = False
+            self._run_probe((prev, cur, nxt), raws if u8 else None, long_[labels], slope, vol, t, ref_bg=ref_bg,
+                            contrast=contrast, hist=entry[4], noise_dn=self._frame_noise_change / math.sqrt(1.5))
+        if self.defocus_model != "uniform" or (self._brightness_known(MATURE_BRIGHTNESS_SAMPLES) and
+                                               (self.probe is None or self.probe.mature)):
             self._resolve_pending()
+
+    def _run_probe(self, frames, raws, occupied, slope, vol, t, *, ref_bg, contrast, hist, noise_dn) -> None:
+        """Inject the completeness probe's artificial drops into crops of this frame, run them
+        through the frame's detection, measurement and tests, and log which pass
+        (:class:`raingauge.gauge.completeness.CompletenessProbe`)."""
+        probe = self.probe
+        prof = self.profile
+        f = prof.focal_length_px
+        e_r = self._drop_brightness()
+        plan = probe.plan(prof.shape, occupied, slope)
+        if not plan:
+            return
+        lin, raw, centres = probe.canvas(frames, plan, min(e_r, self._white_dn), raws=raws,
+                                         delinearize=prof.delinearize)
+        spike = spike_image(*raw) if raw is not None else spike_image(*lin)
+        lab_c, st_c = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope, grow=vol.grow)
+        weights = self.volume.histogram_weights(hist, min(e_r, self._white_dn))
+        floor = self._kappa_floor(weights, vol)
+        # what the model expects the gauge to make of each drop: p(a, z) at the contrast
+        # behind it, times its share of the rate (2 a)^3 v / kappa(a)
+        expected = np.zeros(len(plan))
+        p_pass = np.zeros(len(plan))
+        for j, p in enumerate(plan):
+            x0, y0, cw, ch = p["box"]
+            r = int(math.ceil(p["radius_px"]))
+            xa = int(round(min(p["p0"][0], p["p1"][0]))) - r
+            xb = int(round(max(p["p0"][0], p["p1"][0]))) + r + 1
+            behind = frames[0][int(p["p0"][1]):int(p["p1"][1]) + 1, max(xa, 0):xb]
+            kap = float(vol.kappa(p["radius_m"], weights=weights, noise_dn=noise_dn))
+            if behind.size and kap >= floor:
+                c_drop = min(e_r, self._white_dn) - float(behind.mean())
+                p_pass[j] = vol.pass_probability_at(p["radius_m"], p["depth_m"], c_drop, noise_dn)
+                expected[j] = p_pass[j] * (2.0 * p["radius_m"]) ** 3 * p["velocity_m_s"] / kap
+        # what the gauge makes of each injected drop: its share of the rate,
+        # (2 a)^3 v / kappa(a) with a, v and kappa as measured (0 when it is not counted)
+        estimate = np.zeros(len(plan))
+        if np.any(st_c[1:, 4] > 0):
+            prepared, _ = self._measure_table(lab_c, st_c, lin, lin[0], lin[1], t, ref_bg=ref_bg,
+                                              contrast=contrast, probe=True)
+            cx = np.array([c[0] for c in centres])
+            cy = np.array([c[1] for c in centres])
+            reach = np.array([0.25 * p["motion_px"] + 2.0 for p in plan])
+            for c in prepared:
+                d = np.hypot(cx - c["xc"], cy - c["yc"])
+                j = int(np.argmin(d))
+                if d[j] > reach[j]:
+                    continue
+                a = self._drop_radius(c, e_r, vol)
+                if a is None:
+                    continue
+                kap = float(vol.kappa(a, weights=weights, noise_dn=noise_dn))
+                if not kap >= floor:
+                    continue
+                v = c["mot"] * float(vol.depth_m(a)) / (f * prof.exposure_s)
+                estimate[j] += (2.0 * a) ** 3 * v / kap
+        probe.record(plan, estimate, expected, p_pass)
 
     def _resolve_pending(self) -> None:
         """Decide the frames kept back until the drop brightness E_r was known well enough."""
@@ -631,10 +706,11 @@ class RainGauge:
                     self.drops.append(d)
         self._pending.clear()
 
-    def _screen(self, stats) -> np.ndarray:
-        """Labels worth measuring: whole, long enough, roughly on the velocity law."""
+    def _screen(self, stats, shape=None) -> np.ndarray:
+        """Labels worth measuring: whole (in an image of ``shape``, default the frame's), long
+        enough, roughly on the velocity law."""
         prof = self.profile
-        M, N = prof.shape
+        M, N = prof.shape if shape is None else shape
         x, y, w, h, area = (stats[1:, k].astype(float) for k in range(5))
         whole = (x > EDGE_MARGIN_PX) & (y > EDGE_MARGIN_PX) & (x + w < N - EDGE_MARGIN_PX) & \
                 (y + h < M - EDGE_MARGIN_PX)
@@ -649,27 +725,31 @@ class RainGauge:
         ok &= np.isfinite(r) & (r > -0.95) & (r < 0.55)
         return np.nonzero(ok)[0] + 1
 
-    def _measure_table(self, labels, stats, change, prev, cur, t, *, ref_bg=None, contrast=None):
+    def _measure_table(self, labels, stats, change, prev, cur, t, *, ref_bg=None, contrast=None,
+                       probe: bool = False):
         """Closed-form measurement of all screened streaks of a frame at once
         (:func:`raingauge.gauge.streaks.measure_streak_table`), then the velocity law, the
-        photometric test of Eq. (18) and the overlap chance, all as arrays."""
+        photometric test of Eq. (18) and the overlap chance, all as arrays.  With ``probe``
+        (the completeness probe's canvas, of the labels' shape) nothing is logged: no
+        rejection counts, no brightness samples, no overlap chance."""
         prof = self.profile
         f = prof.focal_length_px
         z0 = prof.focus_distance_m
         T = prof.exposure_s
-        M, N = prof.shape
+        M, N = labels.shape if probe else prof.shape
         from raingauge.physics.streaks import beta_max
 
         bmax = beta_max(T)
         valid = stats[:, 4] > 0
-        sel = self._screen(stats)
+        sel = self._screen(stats, shape=(M, N))
+        rejections = Counter() if probe else self.rejections
         tab = measure_streak_table(change, labels, stats, sel, valid=valid, cur=cur, prev=prev,
                                    contrast=contrast, noise_sigma=self.noise_change)
         w_app, mot, plat = tab["width_apparent"], tab["motion"], tab["plateau"]
         with np.errstate(all="ignore"):
             measurable = tab["ok"] & np.isfinite(w_app) & np.isfinite(mot) & (mot > 0) & (w_app > 0) & (plat > 0)
         n_unmeas = int(np.count_nonzero(~measurable))
-        self.rejections["unmeasurable"] += n_unmeas
+        rejections["unmeasurable"] += n_unmeas
         rejected = n_unmeas
         slope = tab["slope"]
         dx = slope * mot
@@ -680,7 +760,7 @@ class RainGauge:
         with np.errstate(all="ignore"):
             clipped = measurable & ((xc - half_w < 0) | (xc + half_w > N - 1) | (yc - half_h < 0) |
                                     (yc + half_h > M - 1))
-        self.rejections["clipped"] += int(np.count_nonzero(clipped))
+        rejections["clipped"] += int(np.count_nonzero(clipped))
         live = measurable & ~clipped
         with np.errstate(all="ignore"):
             a_app = w_app * z0 / (2 * f)
@@ -697,14 +777,14 @@ class RainGauge:
                                                 model=self.velocity_model, width_sigma_px=err_w[live],
                                                 motion_sigma_px=err_l[live])
         n_law = int(np.count_nonzero(live & ~law))
-        self.rejections["velocity_law"] += n_law
+        rejections["velocity_law"] += n_law
         rejected += n_law
         live &= law
         beta = tab["beta"]
         with np.errstate(all="ignore"):
             eq18 = live & np.isfinite(beta) & ~((beta >= -0.05) & (beta <= bmax + 0.05))
         n18 = int(np.count_nonzero(eq18))
-        self.rejections["photometric_eq18"] += n18
+        rejections["photometric_eq18"] += n18
         rejected += n18
         live &= ~eq18
         # a streak's change is one positive box across it (Eqs. 17, 23); moving scenery
@@ -712,7 +792,7 @@ class RainGauge:
         with np.errstate(all="ignore"):
             shapeless = live & ~(tab["chi2"] <= MAX_CROSS_CHI2)
         n_shape = int(np.count_nonzero(shapeless))
-        self.rejections["cross_profile"] += n_shape
+        rejections["cross_profile"] += n_shape
         rejected += n_shape
         live &= ~shapeless
         idx = np.nonzero(live)[0]
@@ -721,10 +801,11 @@ class RainGauge:
         ib = tab["background_dn"][idx] if ref_bg is None else np.full(idx.size, ref_bg)
         total = exposure_area_px2(plat[idx], mot[idx], w_app[idx])
         focused = 4.0 * total / (math.pi * w_app[idx] ** 2)
-        bright = np.isfinite(ib) & (w_app[idx] >= 2.5)
-        self._brightness.extend(zip(ib[bright].tolist(), (ib + focused)[bright].tolist()))
-        p_over = (self._overlap_probabilities(labels, valid, tab, idx, stats=stats) if self.overlap_correction
-                  else np.zeros(idx.size))
+        if not probe:
+            bright = np.isfinite(ib) & (w_app[idx] >= 2.5)
+            self._brightness.extend(zip(ib[bright].tolist(), (ib + focused)[bright].tolist()))
+        p_over = (self._overlap_probabilities(labels, valid, tab, idx, stats=stats)
+                  if self.overlap_correction and not probe else np.zeros(idx.size))
         prepared = []
         for n, k in enumerate(idx):
             prepared.append({"t": t, "w_app": float(w_app[k]), "mot": float(mot[k]), "dx": float(dx[k]),
@@ -857,18 +938,11 @@ class RainGauge:
         for c in prepared:
             t, w_app, mot, dx, xc, yc = c["t"], c["w_app"], c["mot"], c["dx"], c["xc"], c["yc"]
             vol = c.get("vol", self.volume)
-            if c["photo"] is not None:
-                ib, total = c["photo"]
-                q = float(photometric_focus(total, w_app, e_r - ib)) if np.isfinite(e_r) else 1.0
-                if not q >= vol.q_min:
-                    rejected += 1
-                    self.rejections["defocus_photometric"] += 1
-                    continue
-                w_true = w_app * math.sqrt(min(q, 1.0))
-                a0 = w_true * z0 / (2 * f)
-                a = w_true * float(vol.depth_m(a0)) / (2 * f)
-            else:
-                a = float(vol.true_radius_m(w_app * z0 / (2 * f)))
+            a = self._drop_radius(c, e_r, vol)
+            if a is None:
+                rejected += 1
+                self.rejections["defocus_photometric"] += 1
+                continue
             frame_weights = self._frame_weights(c, e_r)
             kap = float(vol.kappa(a, weights=frame_weights, noise_dn=c.get("noise_dn")))
             area = float(whole_streak_area_px2((dx, mot), w_app, prof.shape)) / self._frame_interval
@@ -876,6 +950,9 @@ class RainGauge:
                 rejected += 1
                 self.rejections["no_volume"] += 1
                 continue
+            if self.probe is not None:
+                # the share of the modelled volume the probe's drops of this size found
+                kap *= float(self.probe.correction(a))
             # a drop whose streak touched another one is lost to the merge: count the
             # isolated ones up by the chance of isolation at this streak's size and frame
             area *= 1.0 - c["p_overlap"]
@@ -896,6 +973,24 @@ class RainGauge:
             self._slopes.append(c["slope"])
             counted.append(d)
         return counted, rejected
+
+    def _drop_radius(self, c: dict, e_r: float, vol) -> float | None:
+        """The radius a [m] of a measured streak ``c``: the photometric focus q of Eq. (18)
+        takes the blur out of its width, and the depth its size is typically seen at sets
+        the scale; None when q fails the defocus test."""
+        prof = self.profile
+        f = prof.focal_length_px
+        z0 = prof.focus_distance_m
+        w_app = c["w_app"]
+        if c["photo"] is None:
+            return float(vol.true_radius_m(w_app * z0 / (2 * f)))
+        ib, total = c["photo"]
+        q = float(photometric_focus(total, w_app, e_r - ib)) if np.isfinite(e_r) else 1.0
+        if not q >= vol.q_min:
+            return None
+        w_true = w_app * math.sqrt(min(q, 1.0))
+        a0 = w_true * z0 / (2 * f)
+        return w_true * float(vol.depth_m(a0)) / (2 * f)
 
     @property
     def drop_brightness_estimate_dn(self) -> float:

@@ -122,6 +122,11 @@ def background_histogram(frame, *, step: int = 8, n_bins: int = 64) -> np.ndarra
     return np.bincount(k, minlength=n_bins)
 
 
+#: Every how many of the 400 depths of a radius the pass probability is kept for
+#: :meth:`SampleVolume.pass_probability_at` [-].
+P_TABLE_STRIDE = 4
+
+
 def _pitch(profile) -> float:
     return profile.pixel_pitch_m if profile.pixel_pitch_m else 5e-6
 
@@ -433,6 +438,9 @@ class SampleVolume:
         kappa(a) [m^3/px^2] on ``radii_m`` at ``contrast_dn``.
     mean_depth_m : ndarray
         Mean depth of the accepted drops, weighted by the sampled space [m].
+    depth_span_m : ndarray (n_radii, 2)
+        The depths [m] between which a drop passes at all (probability above 1e-3 of its
+        best), at any noise and contrast of the table: the depth range kappa integrates.
     apparent_radius_factor : ndarray
         (E[(a'/a)^3 | accepted])^(1/3): how much larger the accepted drops of
         radius a look at z0, the blur included [-].
@@ -478,7 +486,7 @@ class SampleVolume:
         z_all = np.linspace(0.4 * z0, 2.5 * z0, 1600)
         b_all = blur_circle_px(z_all, focal_length_px=f, f_number=prof.f_number, focus_distance_m=z0,
                                pixel_pitch_m=_pitch(prof))
-        table, zbar, fac = [], [], []
+        table, zbar, fac, spans, p_z = [], [], [], [], []
         q_parts = []
         for a in self.radii_m:
             # the accepted drops lie where the blur is at most about the width (q >= q_min):
@@ -497,6 +505,12 @@ class SampleVolume:
                                    detection_threshold_dn=self.detection_threshold_dn, grow=self.grow)
             wt = res["p"] * (z / f) ** 2 * dz
             k = wt.sum(axis=-1)                                  # (n_noises, n_contrasts + 1)
+            # the depths where the drop passes at all, at any noise and contrast of the table
+            p_full = np.broadcast_to(res["p"], wt.shape)
+            p_z.append((z[::P_TABLE_STRIDE].copy(), p_full[:, :-1, ::P_TABLE_STRIDE].astype(np.float32)))
+            p_any = p_full.max(axis=(0, 1))
+            on = np.nonzero(p_any > 1e-3 * p_any.max())[0] if p_any.max() > 0 else np.zeros(0, int)
+            spans.append((z[max(on[0] - 2, 0)], z[min(on[-1] + 2, z.size - 1)]) if on.size else (z0, z0))
             if self.defocus_model == "uniform":
                 shp = res["p"].shape
                 w_app_z = np.broadcast_to(res["apparent_radius_m"], shp)[:, -1] * 2.0 * f / z0
@@ -517,6 +531,10 @@ class SampleVolume:
         self.kappa_table = full[:, 0, :-1]
         self.kappa_m3_px2 = full[:, 0, -1]
         self.mean_depth_m = np.array(zbar)
+        self.depth_span_m = np.array(spans, dtype=float).reshape(-1, 2)
+        self._p_z = p_z
+        self._log_radii = np.log(self.radii_m)
+        self._log_contrasts = np.log(self.contrasts_dn)
         self.apparent_radius_factor = np.array(fac)
         # below one pixel of focused width the size cannot be measured
         self.min_radius_m = self.min_width_px * z0 / (2.0 * f)
@@ -684,6 +702,61 @@ class SampleVolume:
         """Mean depth of accepted drops of radius a [m]."""
         a = np.asarray(radius_m, dtype=float)
         return np.interp(np.log(np.clip(a, 1e-9, None)), np.log(self.radii_m), self.mean_depth_m)
+
+    def depth_span(self, radius_m) -> tuple[np.ndarray, np.ndarray]:
+        """(near, far) depths [m] between which a drop of radius a passes at all
+        (:attr:`depth_span_m`, interpolated in log a)."""
+        la = np.log(np.clip(np.asarray(radius_m, dtype=float), 1e-9, None))
+        lr = np.log(self.radii_m)
+        return (np.interp(la, lr, self.depth_span_m[:, 0]), np.interp(la, lr, self.depth_span_m[:, 1]))
+
+    def pass_probability_at(self, radius_m: float, z_m: float, contrast_dn: float,
+                            noise_dn: float | None = None) -> float:
+        """p(a, z) of :func:`pass_probability` for one drop contrast and frame noise, from the
+        table the volume integrated (linear in log a, log C, the noise and z) [-].
+
+        Parameters
+        ----------
+        radius_m, z_m : float
+            Drop radius a and depth z [m].
+        contrast_dn : float
+            E_r - E_b behind the drop [gray levels].
+        noise_dn : float, optional
+            The frame's noise (default the profile's) [gray levels].
+        """
+        la = math.log(max(float(radius_m), 1e-9))
+        lr = self._log_radii
+        j = int(np.clip(np.searchsorted(lr, la, side="right") - 1, 0, lr.size - 2))
+        tr = min(max((la - lr[j]) / (lr[j + 1] - lr[j]), 0.0, ), 1.0)
+        # the two contrasts and the two noises of the grid around the drop's, linear weights
+        cgrid = self._log_contrasts
+        c = float(contrast_dn)
+        if not c >= self.contrasts_dn[0]:
+            return 0.0
+        lc = math.log(min(c, self.contrasts_dn[-1]))
+        ic = int(np.clip(np.searchsorted(cgrid, lc, side="right") - 1, 0, cgrid.size - 2))
+        tc = min(max((lc - cgrid[ic]) / (cgrid[ic + 1] - cgrid[ic]), 0.0), 1.0)
+        if noise_dn is None or not np.isfinite(noise_dn):
+            i_n, tn = 0, 0.0
+        else:
+            x = float(np.clip(noise_dn, self.noises_dn[0], self.noises_dn[-1]))
+            i_n = int(np.clip(np.searchsorted(self.noises_dn, x, side="right") - 1, 0, self.noises_dn.size - 2))
+            tn = (x - self.noises_dn[i_n]) / (self.noises_dn[i_n + 1] - self.noises_dn[i_n])
+        out = 0.0
+        for k, wk in ((j, 1.0 - tr), (j + 1, tr)):
+            if wk <= 0.0:
+                continue
+            z, p = self._p_z[k]
+            zf = float(z_m)
+            if not z[0] <= zf <= z[-1]:
+                continue
+            iz = min(int((zf - z[0]) / (z[1] - z[0])), z.size - 2)
+            tz = (zf - z[iz]) / (z[iz + 1] - z[iz])
+            blk = p[i_n:i_n + 2, ic:ic + 2, iz:iz + 2].astype(np.float64)
+            val = ((1 - tn) * ((1 - tc) * blk[0, 0] + tc * blk[0, 1]) +
+                   tn * ((1 - tc) * blk[-1, 0] + tc * blk[-1, 1]))
+            out += wk * float((1 - tz) * val[0] + tz * val[-1])
+        return out
 
     def true_radius_m(self, apparent_radius_m) -> np.ndarray:
         """Invert a' = a F(a): the drop radius behind an apparent radius at z0 [m]."""

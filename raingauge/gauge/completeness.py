@@ -1,0 +1,285 @@
+"""Completeness of the gauge, measured with artificial drops in its own frames.
+
+The sample volume (:class:`raingauge.gauge.volume.SampleVolume`) predicts the chance
+that a drop of radius a at depth z is detected, measured and passes the defocus tests,
+and how large it then looks, from a model of the streak over a locally uniform
+background (Eqs. 17-19, 23-27 [GargNayar2007]).  A real scene departs from it: a streak
+crossing a textured background changes its contrast E_r - I_b along its length and is
+detected in pieces, a moving object hides the rain in front of it from the three-frame
+test, noise breaks faint streaks and biases their widths.  None of it is in the model,
+and all of it biases the rate.
+
+The probe measures the bias where it happens.  In every few analysed frames it renders
+artificial streaks of drops of known radius and depth (the uniform capsule of Eqs. 15-17
+with the blur circle of Eq. 23, at the drop brightness E_r the gauge estimated, falling
+at the velocity law's speed along the rain's measured direction) into copies of crops of
+the frame, clear of the streaks already there, runs them through the frame's own
+detection, measurement, tests and sizing, and compares what the gauge makes of them with
+what they are.  Each injected drop i (radius a_i, depth z_i drawn uniformly over the
+span Z_i where it can pass at all, :meth:`SampleVolume.depth_span`) stands for the
+volume (z_i / f)^2 Z_i per pixel of image; the gauge turns it, when counted, into
+(2 a_m)^3 v_m / kappa(a_m) (its own a, v and kappa), so per radius class
+
+    c(a) = sum_i [counted_i] (z_i / f)^2 Z_i (2 a_m)^3 v_m / kappa(a_m)  /  sum_i (2 a_i)^3 v_i
+
+is the factor by which the gauge over-reads (c > 1) or under-reads (c < 1) the rain of
+drops of that size in this scene; the gauge multiplies kappa(a) by it.  The estimate is
+shrunk toward the ratio pooled over all sizes while a class has few injections, and is 1
+until ``min_injections`` were made.  This is the completeness test of crowded-field
+photometry: artificial stars added to the images and measured as the real ones.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+__all__ = ["CompletenessProbe", "CLASS_EDGES_M"]
+
+#: Edges of the probe's radius classes [m] (drop diameters 0.3-5.6 mm).
+CLASS_EDGES_M = np.array([0.15e-3, 0.25e-3, 0.4e-3, 0.6e-3, 0.9e-3, 1.4e-3, 2.8e-3])
+
+#: Clear margin around an injected streak inside its crop [px] (the detection's smoothing,
+#: the measurement's flanks and the edge margin fit in it).
+CROP_MARGIN_PX = 12
+
+#: Bounds of the correction factor [-].
+CORRECTION_RANGE = (0.1, 10.0)
+
+
+class CompletenessProbe:
+    """Artificial drops injected into the gauge's frames: the factor c(a) by which the gauge
+    reads the rain of drops of each radius class in this scene (module docstring).
+
+    Parameters
+    ----------
+    profile : CameraProfile
+    volume : SampleVolume
+        The nominal sample volume (its depth spans and its lowest measurable radius).
+    velocity_model : str
+        The law the injected drops fall at.
+    per_frame : int
+        Drops injected per probed frame.
+    every : int
+        Probe every this many frames.
+    history : int
+        Injections remembered (the latest) [-].
+    min_injections : int
+        Injections before the correction differs from 1.
+    prior_passes : float
+        Weight of the pooled ratio in each class, in drops the model expects to pass.
+    seed : int
+        Seed of the probe's own random numbers (the gauge stays deterministic).
+    """
+
+    def __init__(self, profile, volume, velocity_model: str, *, per_frame: int = 16, every: int = 6,
+                 history: int = 6000, min_injections: int = 300, prior_passes: float = 10.0,
+                 seed: int = 2718):
+        if per_frame < 1 or every < 1:
+            raise ValueError(f"per_frame and every must be >= 1, got {per_frame!r}, {every!r}")
+        self.every = int(every)
+        self.profile = profile
+        self.volume = volume
+        self.velocity_model = velocity_model
+        self.per_frame = int(per_frame)
+        self.min_injections = int(min_injections)
+        self.prior_passes = float(prior_passes)
+        self._rng = np.random.default_rng(seed)
+        self._log: deque = deque(maxlen=int(history))     # (class, estimate, truth) [m^4/s]
+        self.injected = 0
+        self.passed = 0
+        # classes the gauge can size at all (the model's kappa is positive in them)
+        lo = np.maximum(CLASS_EDGES_M[:-1], volume.min_radius_m)
+        self._class_lo = lo
+        self._class_hi = CLASS_EDGES_M[1:]
+        self._live = self._class_hi > lo * 1.05
+        self._next_class = 0
+        self._cache = None
+
+    # ------------------------------------------------------------------ injection
+    def plan(self, shape, occupied: np.ndarray, slope: float) -> list[dict]:
+        """Drops to inject into a frame of ``shape``: radius, depth, streak end points in the
+        frame and the crop around each, placed where ``occupied`` (the frame's detected
+        streaks, bool (M, N)) is clear (crops are copied apart, so they may overlap).
+
+        Parameters
+        ----------
+        shape : (int, int)
+        occupied : (M, N) bool array
+        slope : float
+            The rain's direction dx/dy in the image [-].
+        """
+        from raingauge.gauge.volume import _pitch
+        from raingauge.physics.camera import blur_circle_px
+        from raingauge.physics.drops import fall_velocity
+
+        prof = self.profile
+        M, N = shape
+        f = prof.focal_length_px
+        T = prof.exposure_s
+        live = np.flatnonzero(self._live)
+        if live.size == 0:
+            return []
+        k = live[(self._next_class + np.arange(self.per_frame)) % live.size]
+        self._next_class += self.per_frame
+        a = np.exp(self._rng.uniform(np.log(self._class_lo[k]), np.log(self._class_hi[k])))
+        near, far = self.volume.depth_span(a)
+        z = near + self._rng.random(a.size) * (far - near)
+        v = np.asarray(fall_velocity(2.0 * a, model=self.velocity_model), dtype=float)
+        a_i = f * a / z
+        w = np.maximum(2.0 * a_i, 1.0)
+        b = np.asarray(blur_circle_px(z, focal_length_px=f, f_number=prof.f_number,
+                                      focus_distance_m=prof.focus_distance_m, pixel_pitch_m=_pitch(prof)))
+        r = np.maximum(0.5 * (w + b), 0.5)
+        L = f * v * T / z
+        dx = slope * L
+        with np.errstate(invalid="ignore"):
+            ch = np.ceil(L + 2 * r) + 2 * CROP_MARGIN_PX
+            cw = np.ceil(np.abs(dx) + 2 * r) + 2 * CROP_MARGIN_PX
+            ok = (far > near) & np.isfinite(v) & (v > 0) & (ch < M - 2) & (cw < N - 2)
+        out = []
+        for i in np.flatnonzero(ok):
+            chi, cwi = int(ch[i]), int(cw[i])
+            for _try in range(8):
+                y0 = int(self._rng.integers(1, M - chi))
+                x0 = int(self._rng.integers(1, N - cwi))
+                if not occupied[y0:y0 + chi, x0:x0 + cwi].any():
+                    break
+            else:
+                continue
+            # streak centre near the crop's centre, at a random place within the pixel (the
+            # measured width depends on it), the segment along the rain's direction
+            xc = x0 + 0.5 * (cwi - 1) + float(self._rng.uniform(-0.5, 0.5))
+            yc = y0 + 0.5 * (chi - 1) + float(self._rng.uniform(-0.5, 0.5))
+            out.append({"class": int(k[i]), "radius_m": float(a[i]), "depth_m": float(z[i]),
+                        "span_m": float(far[i] - near[i]), "velocity_m_s": float(v[i]), "box": (x0, y0, cwi, chi),
+                        "p0": (xc - 0.5 * dx[i], yc - 0.5 * L[i]), "p1": (xc + 0.5 * dx[i], yc + 0.5 * L[i]),
+                        "radius_px": float(r[i]), "area_px": math.pi * float(a_i[i]) ** 2,
+                        "centre": (xc, yc), "motion_px": float(L[i])})
+        return out
+
+    def canvas(self, frames, plan: list[dict], drop_brightness_dn: float, *, raws=None, delinearize=None):
+        """The crops of ``plan`` from frames n-1, n, n+1 side by side, the artificial streaks
+        added to frame n's crops (Eq. 17: I = I_b + beta (E_r - I_b)).
+
+        Parameters
+        ----------
+        frames : (prev, cur, nxt) linear float32 (M, N) arrays
+        plan : from :meth:`plan`
+        drop_brightness_dn : float
+            E_r [gray levels].
+        raws : (prev, cur, nxt) uint8 arrays, optional
+            The 8-bit frames of a linear camera: the crops are returned in 8 bits too, frame
+            n's quantised after the streaks were added.
+        delinearize : callable, optional
+            Linear -> 8-bit codes (with ``raws``).
+
+        Returns
+        -------
+        (lin, raw, centres): lin and raw are (prev, cur, nxt) canvases (raw None without
+        ``raws``); centres the streaks' centres (x, y) in the canvas [px].
+        """
+        from raingauge.render.simulator import compose_rain, render_streaks
+
+        gap = 2
+        H = max(p["box"][3] for p in plan)
+        W = sum(p["box"][2] for p in plan) + gap * (len(plan) + 1)
+        lin = [np.zeros((H, W), np.float32) for _ in range(3)]
+        raw = None if raws is None else [np.zeros((H, W), np.uint8) for _ in range(3)]
+        # the space between crops is the same in the three frames: nothing is detected there
+        centres, p0, p1 = [], [], []
+        x = gap
+        for p in plan:
+            x0, y0, cw, ch = p["box"]
+            for i in range(3):
+                lin[i][:ch, x:x + cw] = frames[i][y0:y0 + ch, x0:x0 + cw]
+                if raw is not None:
+                    raw[i][:ch, x:x + cw] = raws[i][y0:y0 + ch, x0:x0 + cw]
+            ox, oy = x - x0, -y0
+            p0.append((p["p0"][0] + ox, p["p0"][1] + oy))
+            p1.append((p["p1"][0] + ox, p["p1"][1] + oy))
+            centres.append((p["centre"][0] + ox, p["centre"][1] + oy))
+            x += cw + gap
+        beta, _ = render_streaks((H, W), np.array(p0), np.array(p1), [p["radius_px"] for p in plan],
+                                 [p["area_px"] for p in plan])
+        lin[1] = compose_rain(lin[1], beta, drop_brightness_dn=drop_brightness_dn)
+        if raw is not None:
+            raw[1] = delinearize(lin[1])
+            lin[1] = raw[1].astype(np.float32)
+        return tuple(lin), (None if raw is None else tuple(raw)), centres
+
+    def due(self, frame_index: int) -> bool:
+        """Whether the frame of this index is probed."""
+        return frame_index % self.every == 0
+
+    def record(self, plan: list[dict], estimate, expected, p_pass) -> None:
+        """Log the outcome of a frame's injections.
+
+        Parameters
+        ----------
+        plan : from :meth:`plan`
+        estimate : (n,) array
+            Per drop, the gauge's (2 a_m)^3 v_m / kappa(a_m) summed over the streaks it
+            counted of it (0: not counted) [m^4/s / (m^3/px^2)].
+        expected : (n,) array
+            Per drop, the same as the model of the sample volume expects it:
+            p(a, z, C, sigma) (2 a)^3 v / kappa(a) (C the contrast behind the drop).
+        p_pass : (n,) array
+            Per drop, the model's p(a, z, C, sigma) alone [-].
+        """
+        f = self.profile.focal_length_px
+        for p, est, exp_, pp in zip(plan, estimate, expected, p_pass):
+            dv = (p["depth_m"] / f) ** 2 * p["span_m"]
+            self._log.append((p["class"], dv * float(est), dv * float(exp_), float(pp)))
+            self.injected += 1
+            self.passed += bool(est > 0)
+        self._cache = None
+
+    # ------------------------------------------------------------------ result
+    @property
+    def mature(self) -> bool:
+        """Whether enough drops were injected for the correction to apply."""
+        return len(self._log) >= self.min_injections
+
+    def class_ratios(self) -> tuple[np.ndarray, np.ndarray]:
+        """(c per class, injections per class): the rain the gauge made of the injected
+        drops over the rain the model expected it to make of the same drops (a ratio
+        estimator: both see the same depths and backgrounds), shrunk toward the pooled
+        ratio; NaN for classes never injected."""
+        n_cls = CLASS_EDGES_M.size - 1
+        if not self._log:
+            return np.full(n_cls, np.nan), np.zeros(n_cls, int)
+        arr = np.asarray(self._log, dtype=float)
+        cls = arr[:, 0].astype(int)
+        found = np.bincount(cls, arr[:, 1], minlength=n_cls)
+        expected = np.bincount(cls, arr[:, 2], minlength=n_cls)
+        n_pass = np.bincount(cls, arr[:, 3], minlength=n_cls)
+        n = np.bincount(cls, minlength=n_cls)
+        pooled = found.sum() / expected.sum() if expected.sum() > 0 else 1.0
+        # each class's ratio rests on the drops the model expected to pass in it; the
+        # prior is worth prior_passes of them (a class the gauge hardly sees stays near
+        # the pooled ratio)
+        with np.errstate(all="ignore"):
+            own = found / expected
+            ratio = (own * n_pass + self.prior_passes * pooled) / (n_pass + self.prior_passes)
+        ratio = np.where((n > 0) & (expected > 0), ratio, np.where(n > 0, pooled, np.nan))
+        return ratio, n
+
+    def correction(self, radius_m) -> np.ndarray:
+        """c(a): the factor on the model's kappa(a) [-] (1 until mature); linear in log a
+        between the classes' centres, constant beyond."""
+        a = np.asarray(radius_m, dtype=float)
+        if not self.mature:
+            return np.ones_like(a)
+        if self._cache is None:
+            ratio, _n = self.class_ratios()
+            centres = np.sqrt(self._class_lo * self._class_hi)
+            ok = np.isfinite(ratio)
+            if not ok.any():
+                self._cache = (np.array([0.0]), np.array([1.0]))
+            else:
+                self._cache = (np.log(centres[ok]), np.clip(ratio[ok], *CORRECTION_RANGE))
+        x, y = self._cache
+        return np.interp(np.log(np.clip(a, 1e-9, None)), x, y)
