@@ -134,6 +134,32 @@ def test_correction_is_one_until_mature_then_the_measured_ratio(volume):
     assert float(fresh.correction(1e-3)) == 1.0
 
 
+def test_relative_error_of_the_correction_is_the_ratio_estimators(volume):
+    """Drops counted at twice their expectation half of the time (ratio 1): the relative
+    standard error of each class is ~1/sqrt(n), and a rate spread over k classes gets
+    1/sqrt(k) of it."""
+    rng = np.random.default_rng(3)
+    probe = _probe(volume, per_frame=16, min_injections=100, history=20000)
+    while probe.injected < 6000:
+        plan = probe.plan(CAM.shape, np.zeros(CAM.shape, bool), slope=0.0)
+        expected = np.ones(len(plan))
+        est = 2.0 * (rng.random(len(plan)) < 0.5) * expected
+        # the log holds dv-weighted values: give every drop the same volume element
+        for p in plan:
+            p["depth_m"], p["span_m"] = CAM.focal_length_px, 1.0
+        probe.record(plan, est, expected, np.full(len(plan), 0.5))
+    ratio, n = probe.class_ratios()
+    rel = probe.class_relative_sd()
+    live = n > 0
+    assert np.all(np.abs(ratio[live] - 1.0) < 4.0 * rel[live] + 0.02)
+    assert rel[live] == pytest.approx(1.0 / np.sqrt(n[live]), rel=0.15)
+    k = int(live.sum())
+    centres = np.sqrt(CLASS_EDGES_M[:-1] * CLASS_EDGES_M[1:])[live]
+    spread = probe.rate_relative_sd(centres, np.ones(k))
+    assert spread == pytest.approx(float(np.sqrt(np.sum(rel[live] ** 2)) / k), rel=1e-9)
+    assert probe.rate_relative_sd([centres[-1]], [1.0]) == pytest.approx(float(rel[live][-1]))
+
+
 def test_probe_leaves_a_dark_uniform_scene_alone():
     """Where the model of the sample volume holds (a dark, uniform, still scene), the probe
     finds the gauge reads the injected drops of every size as the model expects (which

@@ -149,6 +149,11 @@ def test_cli_measure_jsonl_and_csv(heavy, tmp_path, capsys):
     rows = out.strip().splitlines()
     assert rows[0].split(",")[:3] == ["t_start_s", "t_end_s", "rain_rate_mm_h"]
     assert len(rows) == 4 and err == ""
+    # without the completeness probe: the same records, from the model's sample volume alone
+    rc = main(["measure", str(folder), "--camera", str(prof), "--window", "1", "--step", "1", "--no-probe",
+               "--no-progress"])
+    out, err = capsys.readouterr()
+    assert rc == 0 and len(out.strip().splitlines()) == 3
     rc = main(["measure", str(tmp_path / "missing"), "--camera", str(prof)])
     assert rc == 2
 

@@ -660,6 +660,7 @@ def test_run_refuses_a_bad_modbus_tcp_address(cli_error, spec, message):
     ("[gauge]\nwindow_s = 1e400\n", "key [gauge].window_s: expected a finite number, got inf"),
     ("[diagnostics]\ninterval_s = nan\n", "key [diagnostics].interval_s: expected a finite number, got nan"),
     ("[gauge]\nwindow_s = \"abc\"\n", "key [gauge].window_s: expected a number, got 'abc'"),
+    ("[gauge]\ncompleteness_probe = \"yes\"\n", "key [gauge].completeness_probe: expected true or false"),
     ("[source\nuri =\n", "not valid TOML"),
 ])
 def test_run_refuses_a_malformed_config_file(tmp_path, cli_error, toml, message):
@@ -707,3 +708,25 @@ def test_run_refuses_a_recording_with_no_usable_frames(tmp_path, cli_error):
         cv2.imwrite(str(two / f"{i:03d}.png"), np.full((720, 1280), 40, np.uint8))
     cli_error(["run", "--source", two, "--fast", "--db", "off", "--modbus-tcp", "off", "--quiet"],
               "the gauge needs at least 3 consecutive frames")
+
+
+def test_config_switches_the_completeness_probe(tmp_path):
+    """[gauge].completeness_probe reaches the gauge the instrument builds (on by default)."""
+    from raingauge.commands.run import build_instrument
+    from raingauge.instrument.config import config_from_dict
+    from raingauge.instrument.loop import make_gauge
+
+    made = []
+
+    def factory(*a, **kw):
+        made.append(kw)
+        return make_gauge(*a, **kw)
+
+    for flag in (False, True):
+        cfg = config_from_dict({"gauge": {"completeness_probe": flag}, "modbus": {"tcp": ""},
+                                "history": {"path": ""}, "diagnostics": {"enabled": False},
+                                "source": {"uri": "simulate:5", "size": [96, 64]}})
+        inst = build_instrument(cfg, print_records=False, gauge_factory=factory)
+        inst._new_gauge(0.0)
+        assert (inst._gauge.probe is not None) == flag
+    assert made[0]["completeness_probe"] is False and "completeness_probe" not in made[1]

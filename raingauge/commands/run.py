@@ -160,6 +160,8 @@ def build_instrument(config, *, print_records=True, gauge_factory=None):
                           diagnostics_interval_s=float(d["interval_s"]), diagnostics_frames=int(d["frames"]),
                           stall_timeout_s=float(src["stall_timeout_s"]), on_record=on_record,
                           accumulator=acc, modbus=modbus, settings_extra=settings_extra,
+                          gauge_options=({} if config.gauge["completeness_probe"]
+                                         else {"completeness_probe": False}),
                           **({"gauge_factory": gauge_factory} if gauge_factory is not None else {}))
     except ConfigError:
         for out in outputs:

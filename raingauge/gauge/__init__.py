@@ -4,10 +4,12 @@
 pieces are importable on their own: per-streak measurement
 (:mod:`~raingauge.gauge.streaks`), defocus rejection
 (:mod:`~raingauge.gauge.rejection`), sample volume
-(:mod:`~raingauge.gauge.volume`) and window products
+(:mod:`~raingauge.gauge.volume`), its correction by artificial drops in the
+frames (:mod:`~raingauge.gauge.completeness`) and window products
 (:mod:`~raingauge.gauge.products`).
 """
 
+from raingauge.gauge.completeness import CompletenessProbe
 from raingauge.gauge.gauge import QUALITY_FLAGS, RECORD_KEYS, RainGauge
 from raingauge.gauge.products import (
     intensity_class,
@@ -31,7 +33,7 @@ from raingauge.gauge.streaks import (
 from raingauge.gauge.volume import SampleVolume, effective_area_rate_px2_s, pass_probability
 
 __all__ = [
-    "RainGauge", "RECORD_KEYS", "QUALITY_FLAGS",
+    "RainGauge", "RECORD_KEYS", "QUALITY_FLAGS", "CompletenessProbe",
     "StreakProps", "change_images", "spike_image", "detect_streaks", "measure_streaks",
     "measure_streak_table",
     "radius_from_width_m", "velocity_from_length_m_s",

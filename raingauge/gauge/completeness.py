@@ -267,6 +267,36 @@ class CompletenessProbe:
         ratio = np.where((n > 0) & (expected > 0), ratio, np.where(n > 0, pooled, np.nan))
         return ratio, n
 
+    def class_relative_sd(self) -> np.ndarray:
+        """Relative standard error of each class's ratio (the ratio estimator's,
+        sum (x_i - c y_i)^2 / (sum y_i)^2, shrinkage left out); 0 where it cannot be had [-]."""
+        n_cls = CLASS_EDGES_M.size - 1
+        if not self._log:
+            return np.zeros(n_cls)
+        arr = np.asarray(self._log, dtype=float)
+        cls = arr[:, 0].astype(int)
+        x, y = arr[:, 1], arr[:, 2]
+        sx = np.bincount(cls, x, minlength=n_cls)
+        sy = np.bincount(cls, y, minlength=n_cls)
+        with np.errstate(all="ignore"):
+            c = sx / sy
+            res = np.bincount(cls, (x - c[cls] * y) ** 2, minlength=n_cls)
+            rel = np.sqrt(res) / sy / c
+        return np.where(np.isfinite(rel), rel, 0.0)
+
+    def rate_relative_sd(self, radius_m, rate_share) -> float:
+        """Relative standard error the correction adds to a rate made of drops of radii
+        ``radius_m`` [m] carrying ``rate_share`` of it (classes independent) [-]."""
+        if not self.mature:
+            return 0.0
+        a = np.asarray(radius_m, dtype=float).ravel()
+        w = np.clip(np.nan_to_num(np.asarray(rate_share, dtype=float).ravel(), nan=0.0, posinf=0.0), 0.0, None)
+        if a.size == 0 or not np.sum(w) > 0:
+            return 0.0
+        k = np.clip(np.searchsorted(CLASS_EDGES_M, a, side="right") - 1, 0, CLASS_EDGES_M.size - 2)
+        per_class = np.bincount(k, w, minlength=CLASS_EDGES_M.size - 1) / np.sum(w)
+        return float(np.sqrt(np.sum((per_class * self.class_relative_sd()) ** 2)))
+
     def correction(self, radius_m) -> np.ndarray:
         """c(a): the factor on the model's kappa(a) [-] (1 until mature); linear in log a
         between the classes' centres, constant beyond."""

@@ -68,6 +68,16 @@ is still, streaks are detected with hysteresis along the fall
 (:func:`raingauge.gauge.streaks.detect_streaks`), so that a streak passing the
 threshold only in patches is measured whole; the sample volume of those frames
 says so (:class:`raingauge.gauge.volume.SampleVolume` ``grow``).
+
+kappa(a) comes from a model of a streak over a locally uniform background.  A
+textured scene breaks streaks where the background's contrast changes, moving
+objects hide the rain in front of them from the three-frame test, noise biases
+faint streaks: the completeness probe
+(:class:`raingauge.gauge.completeness.CompletenessProbe`) injects artificial
+drops of known size and depth into crops of the gauge's own frames, runs them
+through the same detection, tests and sizing, and multiplies kappa(a) by the
+share of the modelled rain the gauge made of them.  Frames are kept back until
+it has its first estimate (at most until the next record).
 """
 
 from __future__ import annotations
@@ -1169,8 +1179,14 @@ class RainGauge:
             share = np.array([d["diameter_m"] ** 3 * d["velocity_m_s"] * d["weight_s_m3"] for d in drops])
             ok = np.isfinite(share) & (share > 0)
             per_drop = np.bincount(tracks[ok], 3.6e6 * math.pi / 6 * share[ok] / duration)
+            # the completeness probe's own sampling error adds to the sample volume's
+            systematic = 0.03
+            if self.probe is not None:
+                probe_sd = self.probe.rate_relative_sd([0.5 * d["diameter_m"] for d in drops], share)
+                systematic = math.hypot(systematic, probe_sd)
             prod["rain_rate_ci95_mm_h"] = list(_products.rate_interval(
-                per_drop[per_drop > 0], empty_scale=self._empty_scale * self.window_s / duration))
+                per_drop[per_drop > 0], empty_scale=self._empty_scale * self.window_s / duration,
+                systematic_rel=systematic))
             prod["drops_counted"] = int(np.count_nonzero(per_drop > 0))
         rate = prod["rain_rate_mm_h"]
         counted = prod["drops_counted"]

@@ -15,6 +15,7 @@ keys (see ``deploy/raingauge.toml`` for a commented example)::
                   stall_timeout_s    no frame for this long counts as a lost camera [s]
     [gauge]       window_s, step_s   averaging window and record interval [s]
                   velocity_model     fall-velocity law used to size drops
+                  completeness_probe artificial drops measure how the scene hides rain (bool)
     [modbus]      tcp                "HOST:PORT" or "" (off); rtu "PORT[:BAUD]" or "" (off)
                   rtu_parity         "N", "E" or "O"; unit_id 1-247
     [serial]      port               "PORT[:BAUD]" or "" (off) for the NMEA sentences
@@ -46,7 +47,7 @@ DEFAULTS: dict[str, dict[str, Any]] = {
     "camera": {"profile": "gauge-default"},
     "source": {"uri": EMBEDDED_SOURCE, "realtime": True, "size": None, "reconnect_max_s": 60.0,
                "stall_timeout_s": 5.0, "seed": 0},
-    "gauge": {"window_s": 60.0, "step_s": 10.0, "velocity_model": "gunn_kinzer"},
+    "gauge": {"window_s": 60.0, "step_s": 10.0, "velocity_model": "gunn_kinzer", "completeness_probe": True},
     "modbus": {"tcp": "127.0.0.1:5020", "rtu": "", "rtu_parity": "N", "unit_id": 1},
     "serial": {"port": ""},
     "history": {"path": "raingauge.sqlite", "retention_days": 0.0},
@@ -65,6 +66,7 @@ _HINT: dict[tuple[str, str], str] = {
     ("gauge", "window_s"): "window_s = 60.0 (a whole multiple of step_s)",
     ("gauge", "step_s"): "step_s = 10.0",
     ("gauge", "velocity_model"): 'velocity_model = "gunn_kinzer" (or "paper", "atlas1973", "beard1976")',
+    ("gauge", "completeness_probe"): "completeness_probe = true (or false to save its CPU)",
     ("modbus", "tcp"): 'tcp = "0.0.0.0:502" or "" to switch Modbus TCP off',
     ("modbus", "rtu"): 'rtu = "/dev/ttyUSB0:19200" or "" to switch Modbus RTU off',
     ("modbus", "rtu_parity"): 'rtu_parity = "N" (or "E", "O")',
@@ -170,6 +172,7 @@ def _validate(data: dict, source: str | None) -> dict[str, dict]:
     if w > 3600:
         raise _err(S, "gauge", "window_s", f"window {w} s is longer than an hour")
     _string(S, "gauge", "velocity_model", g["velocity_model"])
+    _bool(S, "gauge", "completeness_probe", g["completeness_probe"])
     m = out["modbus"]
     for key in ("tcp", "rtu"):
         _string(S, "modbus", key, m[key])

@@ -59,12 +59,13 @@ __all__ = ["Instrument", "Accumulator", "HistoryWriter", "Diagnostics", "Snapsho
 log = logging.getLogger("raingauge.instrument")
 
 
-def make_gauge(profile, *, window_s: float, step_s: float, velocity_model: str, clock_start_s: float):
+def make_gauge(profile, *, window_s: float, step_s: float, velocity_model: str, clock_start_s: float,
+               completeness_probe: bool = True):
     """The camera rain gauge of Sec. 8 (:class:`raingauge.gauge.RainGauge`)."""
     from raingauge.gauge import RainGauge
 
     return RainGauge(profile, window_s=window_s, step_s=step_s, velocity_model=velocity_model,
-                     clock_start_s=clock_start_s)
+                     clock_start_s=clock_start_s, completeness_probe=completeness_probe)
 
 
 # ---------------------------------------------------------------------- accumulation
@@ -542,6 +543,7 @@ class Instrument:
     stall_timeout_s : [s] a live source silent this long is "lost"
     on_record : called with every record (printing); exceptions are logged
     gauge_factory : builds the gauge (default :func:`make_gauge`)
+    gauge_options : more keyword arguments of ``gauge_factory`` (e.g. ``completeness_probe``)
     wall_t0 : [s since epoch] wall-clock time of the instrument clock's zero
     accumulator : :class:`Accumulator` to continue (restored from the history database)
     modbus : the Modbus output among ``outputs`` (for status updates between records), optional
@@ -554,7 +556,8 @@ class Instrument:
                  diagnostics_frames: int = 32, stall_timeout_s: float = 5.0,
                  on_record: Callable[[dict], None] | None = None,
                  gauge_factory: Callable[..., Any] = make_gauge, wall_t0: float | None = None,
-                 accumulator: Accumulator | None = None, modbus=None, settings_extra: dict | None = None):
+                 accumulator: Accumulator | None = None, modbus=None, settings_extra: dict | None = None,
+                 gauge_options: dict | None = None):
         self.profile = profile
         self.grabber = grabber
         self.window_s = float(window_s)
@@ -567,6 +570,7 @@ class Instrument:
         self.stall_timeout_s = stall_timeout_s
         self.on_record = on_record
         self.gauge_factory = gauge_factory
+        self.gauge_options = dict(gauge_options or {})
         self.wall_t0 = time.time() if wall_t0 is None else float(wall_t0)
         self.accumulator = accumulator or Accumulator()
         self.modbus = modbus
@@ -625,7 +629,8 @@ class Instrument:
     # ------------------------------------------------------------------ records
     def _new_gauge(self, t_s: float) -> None:
         self._gauge = self.gauge_factory(self.profile, window_s=self.window_s, step_s=self.step_s,
-                                         velocity_model=self.velocity_model, clock_start_s=t_s)
+                                         velocity_model=self.velocity_model, clock_start_s=t_s,
+                                         **self.gauge_options)
         self._gauge_acc_prev = None
 
     def _emit(self, rec: dict[str, Any]) -> None:
