@@ -77,6 +77,11 @@ def test_plan_keeps_clear_of_detected_streaks(volume):
         assert lo <= p["radius_m"] <= hi
     full = probe.plan(CAM.shape, np.ones(CAM.shape, bool), slope=0.0)
     assert full == []
+    # in wind each drop slants by its drift over its own fall speed: small drops more
+    windy = probe.plan(CAM.shape, np.zeros(CAM.shape, bool), slope=0.0, drift_m_s=2.0)
+    for p in windy:
+        (xa, ya), (xb, yb) = p["p0"], p["p1"]
+        assert (xb - xa) / (yb - ya) == pytest.approx(2.0 / p["velocity_m_s"])
 
 
 def test_canvas_adds_the_eq17_streak_to_frame_n_only(volume):

@@ -99,7 +99,7 @@ class CompletenessProbe:
         self._cache = None
 
     # ------------------------------------------------------------------ injection
-    def plan(self, shape, occupied: np.ndarray, slope: float) -> list[dict]:
+    def plan(self, shape, occupied: np.ndarray, slope: float, *, drift_m_s: float | None = None) -> list[dict]:
         """Drops to inject into a frame of ``shape``: radius, depth, streak end points in the
         frame and the crop around each, placed where ``occupied`` (the frame's detected
         streaks, bool (M, N)) is clear (crops are copied apart, so they may overlap).
@@ -109,7 +109,10 @@ class CompletenessProbe:
         shape : (int, int)
         occupied : (M, N) bool array
         slope : float
-            The rain's direction dx/dy in the image [-].
+            The rain's direction dx/dy in the image [-] (when ``drift_m_s`` is not given).
+        drift_m_s : float, optional
+            The drops' horizontal speed across the image (the wind) [m/s]: each drop then
+            slants by drift / v(a), the slower small drops more.
         """
         from raingauge.gauge.volume import _pitch
         from raingauge.physics.camera import blur_circle_px
@@ -134,7 +137,7 @@ class CompletenessProbe:
                                       focus_distance_m=prof.focus_distance_m, pixel_pitch_m=_pitch(prof)))
         r = np.maximum(0.5 * (w + b), 0.5)
         L = f * v * T / z
-        dx = slope * L
+        dx = slope * L if drift_m_s is None else f * float(drift_m_s) * T / z
         with np.errstate(invalid="ignore"):
             ch = np.ceil(L + 2 * r) + 2 * CROP_MARGIN_PX
             cw = np.ceil(np.abs(dx) + 2 * r) + 2 * CROP_MARGIN_PX

@@ -407,6 +407,7 @@ class RainGauge:
         self.rejections: Counter = Counter()
         self._dilated = None
         self._slopes: deque = deque(maxlen=50)          # streak direction dx/dy of counted drops
+        self._drifts: deque = deque(maxlen=50)          # their horizontal speed [m/s] (the wind)
         self._pending: list = []                        # frames awaiting the E_r estimate
         self._rng = np.random.default_rng(12345)
         self._empty_scale = self._typical_drop_rate()
@@ -636,7 +637,9 @@ class RainGauge:
         prof = self.profile
         f = prof.focal_length_px
         e_r = self._drop_brightness()
-        plan = probe.plan(prof.shape, occupied, slope)
+        # the drops drift with the wind: a slower (smaller) drop slants more
+        drift = float(np.median(self._drifts)) if len(self._drifts) >= 5 else None
+        plan = probe.plan(prof.shape, occupied, slope, drift_m_s=drift)
         if not plan:
             return
         lin, raw, centres = probe.canvas(frames, plan, min(e_r, self._white_dn), raws=raws,
@@ -981,6 +984,7 @@ class RainGauge:
                  "accum_base_mm": 1e3 * math.pi / 6 * (2 * a) ** 3 * v * weight}
             d["accum_mm"] = d["accum_base_mm"] * fill
             self._slopes.append(c["slope"])
+            self._drifts.append(dx * z / (f * T))
             counted.append(d)
         return counted, rejected
 
