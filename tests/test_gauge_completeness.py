@@ -65,12 +65,16 @@ def test_plan_keeps_clear_of_detected_streaks(volume):
     occupied[:, 150:] = True
     plan = probe.plan(CAM.shape, occupied, slope=0.1)
     assert len(plan) >= 6
+    from raingauge.gauge.completeness import CLEARANCE_PX
+
     for p in plan:
         x0, y0, cw, ch = p["box"]
-        assert x0 + cw <= 150
-        assert not occupied[y0:y0 + ch, x0:x0 + cw].any()
-        # the streak lies inside its crop, along the rain's direction
+        # the streak and its clearance are clear of the detected streaks
         (xa, ya), (xb, yb) = p["p0"], p["p1"]
+        reach = p["radius_px"] + CLEARANCE_PX
+        assert max(xa, xb) + reach < 150
+        assert not occupied[int(ya - reach):int(yb + reach) + 1, int(min(xa, xb) - reach):int(max(xa, xb) + reach) + 1].any()
+        # the streak lies inside its crop, along the rain's direction
         assert (xb - xa) == pytest.approx(0.1 * (yb - ya))
         assert y0 + p["radius_px"] < ya < yb < y0 + ch - p["radius_px"]
         lo, hi = CLASS_EDGES_M[p["class"]], CLASS_EDGES_M[p["class"] + 1]

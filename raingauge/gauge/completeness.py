@@ -45,6 +45,9 @@ CLASS_EDGES_M = np.array([0.15e-3, 0.25e-3, 0.4e-3, 0.6e-3, 0.9e-3, 1.4e-3, 2.8e
 #: the measurement's flanks and the edge margin fit in it).
 CROP_MARGIN_PX = 12
 
+#: Clear space around an injected streak, free of the frame's detected streaks [px].
+CLEARANCE_PX = 3
+
 #: Bounds of the correction factor [-].
 CORRECTION_RANGE = (0.1, 10.0)
 
@@ -102,7 +105,9 @@ class CompletenessProbe:
     def plan(self, shape, occupied: np.ndarray, slope: float, *, drift_m_s: float | None = None) -> list[dict]:
         """Drops to inject into a frame of ``shape``: radius, depth, streak end points in the
         frame and the crop around each, placed where ``occupied`` (the frame's detected
-        streaks, bool (M, N)) is clear (crops are copied apart, so they may overlap).
+        streaks, bool (M, N)) leaves the streak and :data:`CLEARANCE_PX` around it clear
+        (the crop's margins may hold other streaks, as a real drop's surroundings do; crops
+        are copied apart, so they may overlap).
 
         Parameters
         ----------
@@ -145,17 +150,20 @@ class CompletenessProbe:
         out = []
         for i in np.flatnonzero(ok):
             chi, cwi = int(ch[i]), int(cw[i])
+            # the streak and its clearance, relative to the crop's corner
+            hx = 0.5 * abs(dx[i]) + r[i] + CLEARANCE_PX
+            hy = 0.5 * L[i] + r[i] + CLEARANCE_PX
             for _try in range(8):
                 y0 = int(self._rng.integers(1, M - chi))
                 x0 = int(self._rng.integers(1, N - cwi))
-                if not occupied[y0:y0 + chi, x0:x0 + cwi].any():
+                # streak centre near the crop's centre, at a random place within the pixel
+                # (the measured width depends on it)
+                xc = x0 + 0.5 * (cwi - 1) + float(self._rng.uniform(-0.5, 0.5))
+                yc = y0 + 0.5 * (chi - 1) + float(self._rng.uniform(-0.5, 0.5))
+                if not occupied[max(int(yc - hy), 0):int(yc + hy) + 1, max(int(xc - hx), 0):int(xc + hx) + 1].any():
                     break
             else:
                 continue
-            # streak centre near the crop's centre, at a random place within the pixel (the
-            # measured width depends on it), the segment along the rain's direction
-            xc = x0 + 0.5 * (cwi - 1) + float(self._rng.uniform(-0.5, 0.5))
-            yc = y0 + 0.5 * (chi - 1) + float(self._rng.uniform(-0.5, 0.5))
             out.append({"class": int(k[i]), "radius_m": float(a[i]), "depth_m": float(z[i]),
                         "span_m": float(far[i] - near[i]), "velocity_m_s": float(v[i]), "box": (x0, y0, cwi, chi),
                         "p0": (xc - 0.5 * dx[i], yc - 0.5 * L[i]), "p1": (xc + 0.5 * dx[i], yc + 0.5 * L[i]),

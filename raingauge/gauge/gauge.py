@@ -671,12 +671,15 @@ class RainGauge:
                                               contrast=contrast, probe=True)
             cx = np.array([c[0] for c in centres])
             cy = np.array([c[1] for c in centres])
-            reach = np.array([0.25 * p["motion_px"] + 2.0 for p in plan])
+            # a streak measured of an injected drop lies on it (other streaks in the crop's
+            # margins are at least the clearance away across)
+            reach_y = np.array([0.25 * p["motion_px"] + 2.0 for p in plan])
+            reach_x = np.array([p["radius_px"] + 2.0 + 0.25 * abs(p["p1"][0] - p["p0"][0]) for p in plan])
             for c in prepared:
-                d = np.hypot(cx - c["xc"], cy - c["yc"])
-                j = int(np.argmin(d))
-                if d[j] > reach[j]:
+                near = np.flatnonzero((np.abs(cx - c["xc"]) <= reach_x) & (np.abs(cy - c["yc"]) <= reach_y))
+                if near.size == 0:
                     continue
+                j = int(near[np.argmin(np.hypot(cx[near] - c["xc"], cy[near] - c["yc"]))])
                 a = self._drop_radius(c, e_r, vol)
                 if a is None:
                     continue
