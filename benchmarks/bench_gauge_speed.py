@@ -2,7 +2,9 @@
 
 The pipeline per frame: linearise, Eq. (19) spike image, streak labelling,
 screening, sub-pixel measurement, defocus rejection, de-duplication and the
-sliding window (:class:`raingauge.gauge.RainGauge`).  The target is >= 60
+sliding window (:class:`raingauge.gauge.RainGauge`), with the completeness probe
+(artificial drops in the frames, :mod:`raingauge.gauge.completeness`) and, beside
+it, without.  The target is >= 60
 frames/s (twice real time for a 30 frames/s camera).  MOG2.apply (a learned
 per-pixel Gaussian mixture background model [Zivkovic2004]) runs on the same
 frames as the baseline.  Also prints the peak memory (Python allocations and
@@ -54,7 +56,8 @@ def main(argv=None) -> int:
           f"CPU time")
     for background in args.backgrounds.split(","):
         print(f"## background {background}")
-        print(f"{'rate':>6} {'gauge fps':>10} {'MOG2 fps':>9} {'ratio':>6} {'streaks/frame':>13} {'counted':>8}")
+        print(f"{'rate':>6} {'gauge fps':>10} {'no probe':>9} {'MOG2 fps':>9} {'ratio':>6} {'streaks/frame':>13} "
+              f"{'counted':>8}")
         for rate in (float(r) for r in args.rates.split(",")):
             frames, _truth = render_clip(profile, n_frames=args.frames, rain_rate_mm_h=rate, seed=7,
                                          background=background)
@@ -64,6 +67,14 @@ def main(argv=None) -> int:
                 gauge.process(fr)
             recs = gauge.flush()
             t_gauge = time.process_time() - t0
+            # the same without the completeness probe (its share of the time)
+            plain = RainGauge(profile, window_s=60.0, step_s=10.0, velocity_model="gunn_kinzer",
+                              completeness_probe=False)
+            t0 = time.process_time()
+            for fr in frames:
+                plain.process(fr)
+            plain.flush()
+            t_plain = time.process_time() - t0
             mog = cv2.createBackgroundSubtractorMOG2(history=500, varThreshold=16, detectShadows=False)
             t0 = time.process_time()
             for fr in frames:
@@ -72,7 +83,7 @@ def main(argv=None) -> int:
             fps_g = len(frames) / t_gauge
             fps_m = len(frames) / t_mog
             rejected = sum(r["drops_rejected_defocus"] for r in recs)
-            print(f"{rate:6.1f} {fps_g:10.1f} {fps_m:9.1f} {fps_g / fps_m:6.2f} "
+            print(f"{rate:6.1f} {fps_g:10.1f} {len(frames) / t_plain:9.1f} {fps_m:9.1f} {fps_g / fps_m:6.2f} "
                   f"{(rejected + len(gauge.drops)) / len(frames):13.1f} {len(gauge.drops):8d}", flush=True)
             del frames
 
