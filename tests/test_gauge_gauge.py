@@ -398,6 +398,51 @@ def test_drop_brightness_ignores_the_share_of_defocused_pieces():
     assert np.isnan(drop_brightness_dn([], []))
 
 
+def test_drop_brightness_is_the_fixed_point_of_the_percentile():
+    """The estimate reads each step's percentile off one sorted copy of the samples; it is
+    the fixed point D = P{d : d >= q_min D} taken literally, with np.percentile on the
+    kept samples at every step (independent computation), to the last bit."""
+    from raingauge.gauge.gauge import drop_brightness_dn
+
+    def literal(x, b, q_min, percentile):
+        d = np.asarray(x) - np.asarray(b)
+        e = float(np.percentile(d, percentile))
+        for _ in range(50):
+            keep = d >= q_min * e
+            if not keep.any():
+                break
+            e_new = float(np.percentile(d[keep], percentile))
+            if abs(e_new - e) <= 1e-4 * max(abs(e), 1.0):
+                e = e_new
+                break
+            e = e_new
+        return float(np.median(b)) + e
+
+    rng = np.random.default_rng(11)
+    for n in (1, 2, 7, 150, 2000):
+        b = rng.normal(60.0, 5.0, n)
+        x = b + np.concatenate([rng.uniform(100, 160, n - n // 3), rng.uniform(0, 20, n // 3)])
+        for q_min, pct in ((0.6, 75.0), (0.3, 50.0), (0.9, 90.0)):
+            assert drop_brightness_dn(x, b, q_min=q_min, q_ref=1.0, percentile=pct) == literal(x, b, q_min, pct)
+
+
+def test_gauge_keeps_the_latest_brightness_samples():
+    """The gauge's brightness samples are the latest BRIGHTNESS_SAMPLES pairs, whatever the
+    batches they came in."""
+    from raingauge.gauge.gauge import _SampleRing
+
+    ring = _SampleRing(5)
+    ring.extend([1.0, 2.0, 3.0], [11.0, 12.0, 13.0])
+    ring.extend([4.0], [14.0])
+    ring.extend([5.0, 6.0, 7.0], [15.0, 16.0, 17.0])
+    first, second = ring.arrays()
+    assert len(ring) == 5 and sorted(first) == [3.0, 4.0, 5.0, 6.0, 7.0]
+    assert sorted(second - first) == [10.0] * 5
+    v = ring.version
+    ring.extend(np.arange(12.0), np.arange(12.0))         # more than it holds: the last 5
+    assert sorted(ring.arrays()[0]) == [7.0, 8.0, 9.0, 10.0, 11.0] and ring.version > v
+
+
 def test_gauge_estimates_the_drop_brightness(heavy):
     """The gauge's running E_r on a simulated heavy shower matches the simulator's drop
     brightness; a given E_r is used as is, and a nonsensical one is refused."""

@@ -251,6 +251,22 @@ def test_frame_volume_averages_its_backgrounds(volume):
         0.5 * volume.visible_fraction(a, weights=dark_only), rel=1e-9)
 
 
+def test_histogram_weights_average_the_contrast_weights_of_the_pixels(volume):
+    """A frame's weights are the mean of contrast_weights over its pixels: from the
+    histogram of its backgrounds they equal contrast_weights of every sampled pixel's
+    contrast (bin centres) taken one by one."""
+    from raingauge.gauge.volume import BACKGROUND_BIN_DN, background_histogram
+
+    rng = np.random.default_rng(4)
+    frame = np.clip(rng.normal(120.0, 60.0, (240, 320)), 0, 255).astype(np.float32)
+    hist = background_histogram(frame)
+    centres = (np.arange(hist.size) + 0.5) * BACKGROUND_BIN_DN
+    for e_r in (90.0, 200.0, 400.0):
+        per_pixel = np.repeat(e_r - centres, hist.astype(int))
+        assert volume.histogram_weights(hist, e_r) == pytest.approx(volume.contrast_weights(per_pixel),
+                                                                   rel=1e-12, abs=1e-15)
+
+
 def test_hidden_share_from_the_background(volume):
     """Against a dark background every measurable size is visible (nothing hidden); against a
     background as bright as the drops nothing is, and the share of the rate hidden is all."""

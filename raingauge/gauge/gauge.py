@@ -281,18 +281,69 @@ def drop_brightness_dn(samples_dn, background_dn, *, q_min: float = 0.6, q_ref: 
     x, b = x[ok], b[ok]
     if x.size == 0:
         return float("nan")
-    d = x - b
-    e = float(np.percentile(d, percentile))
+    # sorted once: the samples d >= q_min e are a tail of the sorted contrasts, and each
+    # step's percentile is read off that tail
+    d = np.sort(x - b)
+    e = _percentile_of_sorted(d, 0, percentile)
     for _ in range(int(iterations)):
-        keep = d >= q_min * e
-        if not keep.any():
+        lo = int(np.searchsorted(d, q_min * e, side="left"))
+        if lo >= d.size:
             break
-        e_new = float(np.percentile(d[keep], percentile))
+        e_new = _percentile_of_sorted(d, lo, percentile)
         if abs(e_new - e) <= 1e-4 * max(abs(e), 1.0):
             e = e_new
             break
         e = e_new
     return float(np.median(b)) + e / float(q_ref)
+
+
+def _percentile_of_sorted(s: np.ndarray, lo: int, percentile: float) -> float:
+    """``np.percentile(s[lo:], percentile)`` of an increasing array (the same linear
+    interpolation, in the same arithmetic), without sorting again."""
+    n = s.size - lo
+    pos = (n - 1) * (float(percentile) / 100.0)
+    i = int(math.floor(pos))
+    t = pos - i
+    a = float(s[lo + i])
+    b = float(s[lo + min(i + 1, n - 1)])
+    # numpy's lerp: from the nearer end
+    return b - (b - a) * (1.0 - t) if t >= 0.5 else a + (b - a) * t
+
+
+class _SampleRing:
+    """The latest ``size`` pairs (E_b, E_r estimate) of law-abiding streaks, in two
+    preallocated arrays; ``version`` changes with every addition.  Only order-free
+    statistics (percentiles, medians) are taken of them, so the ring is not unrolled."""
+
+    def __init__(self, size: int):
+        self._a = np.empty(int(size))
+        self._b = np.empty(int(size))
+        self._n = 0          # samples held
+        self._head = 0       # next slot written
+        self.version = 0
+
+    def __len__(self) -> int:
+        return self._n
+
+    def extend(self, first, second) -> None:
+        first = np.asarray(first, dtype=np.float64).ravel()
+        second = np.asarray(second, dtype=np.float64).ravel()
+        size = self._a.size
+        if first.size > size:
+            first, second = first[-size:], second[-size:]
+        k = first.size
+        if k == 0:
+            return
+        idx = (self._head + np.arange(k)) % size
+        self._a[idx] = first
+        self._b[idx] = second
+        self._head = int((self._head + k) % size)
+        self._n = min(self._n + k, size)
+        self.version += 1
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """(first, second) of the samples held (in ring order)."""
+        return self._a[:self._n], self._b[:self._n]
 
 
 class RainGauge:
@@ -402,7 +453,7 @@ class RainGauge:
         self._gaps: deque = deque()                     # (t_before, t_after) of gaps in the frame times
         self._noise_log: deque = deque(maxlen=300)      # noise of the recent frames [gray levels]
         self._sharpness: deque = deque(maxlen=int(max(10 * profile.frame_rate_hz, 10)))
-        self._brightness: deque = deque(maxlen=BRIGHTNESS_SAMPLES)    # (E_b, E_r estimate) of law-abiding streaks
+        self._brightness = _SampleRing(BRIGHTNESS_SAMPLES)   # (E_b, E_r estimate) of law-abiding streaks
         #: why measured streaks were not counted (diagnostics)
         self.rejections: Counter = Counter()
         self._dilated = None
@@ -819,7 +870,7 @@ class RainGauge:
         focused = 4.0 * total / (math.pi * w_app[idx] ** 2)
         if not probe:
             bright = np.isfinite(ib) & (w_app[idx] >= 2.5)
-            self._brightness.extend(zip(ib[bright].tolist(), (ib + focused)[bright].tolist()))
+            self._brightness.extend(ib[bright], (ib + focused)[bright])
         p_over = (self._overlap_probabilities(labels, valid, tab, idx, stats=stats)
                   if self.overlap_correction and not probe else np.zeros(idx.size))
         prepared = []
@@ -919,7 +970,7 @@ class RainGauge:
             total = float(exposure_area_px2(plat, mot, w_app))
             focused_contrast = 4.0 * total / (math.pi * w_app * w_app)
             if np.isfinite(ib) and w_app >= 2.5:
-                self._brightness.append((float(ib), float(ib + focused_contrast)))
+                self._brightness.extend([float(ib)], [float(ib + focused_contrast)])
             cands.append((sp, w_app, mot, dx, xc, yc, (ib, total)))
         prepared = []
         for sp, w_app, mot, dx, xc, yc, photo in cands:
@@ -1037,12 +1088,12 @@ class RainGauge:
         q_ref = self._brightness_q()
         # the same samples give the same estimate: computed once per new sample set (the
         # last sample is alive in the deque, so its identity marks the set)
-        key = (len(self._brightness), id(self._brightness[-1]) if self._brightness else None, q_ref)
+        key = (self._brightness.version, q_ref)
         cached = getattr(self, "_brightness_cache", None)
         if cached is not None and cached[0] == key:
             return cached[1]
-        pairs = np.asarray(self._brightness, dtype=np.float64).reshape(-1, 2)
-        e_r = drop_brightness_dn(pairs[:, 1], pairs[:, 0], q_min=self.volume.q_min, q_ref=q_ref,
+        backgrounds, samples = self._brightness.arrays()
+        e_r = drop_brightness_dn(samples, backgrounds, q_min=self.volume.q_min, q_ref=q_ref,
                                  percentile=BRIGHTNESS_PERCENTILE)
         self._brightness_cache = (key, e_r)
         return e_r

@@ -343,10 +343,12 @@ def change_noise_dn(prev, cur, nxt, *, step: int = 4, along_px: int = 1, iterati
     ch = ch.ravel()
     centre, sd = float(np.median(ch)), float(np.std(ch))
     for _ in range(iterations):
-        keep = np.abs(ch - centre) <= 3.0 * sd
-        if not keep.any():
+        x = ch[np.abs(ch - centre) <= 3.0 * sd]
+        if not x.size:
             break
-        centre, sd = float(np.mean(ch[keep])), float(np.std(ch[keep])) * 1.0135
+        centre = float(x.mean())
+        dev = x - np.float32(centre)
+        sd = math.sqrt(float(np.dot(dev, dev)) / x.size) * 1.0135
     return sd * math.sqrt(k)
 
 

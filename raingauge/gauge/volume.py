@@ -591,9 +591,18 @@ class SampleVolume:
         if not total > 0:
             return np.zeros(self.contrasts_dn.size)
         centres = (np.arange(h.size) + 0.5) * BACKGROUND_BIN_DN
-        used = h > 0
-        per = np.array([self.contrast_weights([c]) for c in float(drop_brightness_dn) - centres[used]])
-        return (h[used, None] * per).sum(axis=0) / total
+        # each bin's contrast E_r - E_b on the grid (contrast_weights of it alone), weighted
+        # by the bin's count, all bins at once
+        c = float(drop_brightness_dn) - centres
+        grid = np.log(self.contrasts_dn)
+        seen = (h > 0) & np.isfinite(c) & (c >= self.contrasts_dn[0])
+        lc = np.log(np.clip(c[seen], self.contrasts_dn[0], self.contrasts_dn[-1]))
+        i = np.clip(np.searchsorted(grid, lc, side="right") - 1, 0, grid.size - 2)
+        t = np.clip((lc - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0)
+        hs = h[seen]
+        out = (np.bincount(i, hs * (1.0 - t), minlength=grid.size)
+               + np.bincount(i + 1, hs * t, minlength=grid.size))
+        return out / total
 
     def hidden_share(self, weights, rate_mm_h: float, *, visible_min: float = 0.5,
                      velocity_model: str | None = None) -> tuple[float, float]:
