@@ -679,15 +679,25 @@ class SampleVolume:
             profile's).
         """
         a = np.asarray(radius_m, dtype=float)
-        table = self._noise_slice(noise_dn)
-        if weights is not None:
-            col = table @ np.asarray(weights, dtype=float)
-        elif contrast_dn is not None:
-            col = table @ self.contrast_weights([float(contrast_dn)])
-        elif noise_dn is not None:
-            col = table @ self.contrast_weights([float(self.contrast_dn)])
-        else:
+        if weights is None and contrast_dn is None and noise_dn is None:
             col = self.kappa_m3_px2
+        else:
+            w = None if weights is None else np.asarray(weights, dtype=float)
+            # the drops of one frame share its weights and noise: the column is kept for them
+            key = (None if w is None else w.tobytes(), None if contrast_dn is None else float(contrast_dn),
+                   None if noise_dn is None else float(noise_dn))
+            cached = getattr(self, "_kappa_col", None)
+            if cached is not None and cached[0] == key:
+                col = cached[1]
+            else:
+                table = self._noise_slice(noise_dn)
+                if w is not None:
+                    col = table @ w
+                elif contrast_dn is not None:
+                    col = table @ self.contrast_weights([float(contrast_dn)])
+                else:
+                    col = table @ self.contrast_weights([float(self.contrast_dn)])
+                self._kappa_col = (key, col)
         k = np.interp(np.log(np.clip(a, 1e-9, None)), np.log(self.radii_m), col, left=0.0, right=col[-1])
         return np.where(a >= self.min_radius_m, k, 0.0)
 
