@@ -212,6 +212,35 @@ def test_low_contrast_interval_says_so():
     assert "low_contrast" not in rec["quality"]
 
 
+def test_condition_uncertainty_follows_the_validation():
+    """Beyond the counting statistics the interval carries the scatter the validation
+    matrix found: 3 % on a dark, still scene; on a low-contrast or moving scene 11 % at
+    the noise of a good camera, 40 % from 2.5 gray levels, linear between."""
+    from raingauge.gauge.gauge import condition_uncertainty
+
+    assert condition_uncertainty([], 3.0) == pytest.approx(0.03)
+    assert condition_uncertainty(["dropped_frames"], 3.0) == pytest.approx(0.03)
+    assert condition_uncertainty(["low_contrast"], 1.0) == pytest.approx(0.11)
+    assert condition_uncertainty(["scene_motion"], 3.0) == pytest.approx(0.40)
+    assert condition_uncertainty(["low_contrast", "scene_motion"], 2.0) == pytest.approx(0.255)
+    assert condition_uncertainty(["low_contrast"], float("nan")) == pytest.approx(0.40)
+
+
+def test_flagged_window_interval_carries_the_condition_uncertainty():
+    """A textured scene in 3 gray levels of noise is flagged low_contrast; its interval
+    reaches at least 1.96 x 40 % of the reading on either side (the counting adds to it)."""
+    sim = pytest.importorskip("raingauge.render.simulator")
+    cam = CAM.replace(noise_sigma_dn=3.0)
+    frames, _truth = sim.render_clip(cam, seconds=2.0, rain_rate_mm_h=30.0, background="skimage:brick",
+                                     drop_brightness_dn=200.0, seed=5)
+    rec = _run_cam(cam, frames, window_s=2.0, step_s=2.0)[-1]
+    rate = rec["rain_rate_mm_h"]
+    lo, hi = rec["rain_rate_ci95_mm_h"]
+    assert "low_contrast" in rec["quality"] and rate > 0
+    assert hi - rate >= 1.96 * 0.40 * rate * 0.999
+    assert rate - lo >= min(1.96 * 0.40 * rate, rate) * 0.999
+
+
 def _run_cam(cam, frames, **kw):
     g = RainGauge(cam, velocity_model="gunn_kinzer", **kw)
     recs = []

@@ -123,6 +123,35 @@ __all__ = ["RainGauge", "RECORD_KEYS", "QUALITY_FLAGS", "merge_probability"]
 #: sky seen through the drop, Sec. 4.2.3), only for the ``low_contrast`` flag.
 NOMINAL_DROP_BRIGHTNESS_DN = 200.0
 
+#: Relative standard uncertainty of the rate beyond the counting statistics, from the
+#: validation matrix (benchmarks/bench_gauge_accuracy.py, 60-s clips: the scatter of
+#: measured/true left when the counting variance is taken out): 3 % on a dark, still
+#: scene; where a window is flagged ``low_contrast`` or ``scene_motion`` it is
+#: CONDITION_UNCERTAINTY[0] at a frame noise up to CONDITION_NOISE_DN[0] and
+#: CONDITION_UNCERTAINTY[1] from CONDITION_NOISE_DN[1] up, linear between (streaks
+#: broken by texture, moving objects and noise are what the sample volume's model and
+#: the completeness probe know least well) [-].
+BASE_UNCERTAINTY = 0.03
+CONDITION_UNCERTAINTY = (0.11, 0.40)
+CONDITION_NOISE_DN = (1.5, 2.5)
+
+#: Share of a window's frames that must carry a flag for the window to carry it [-].
+FLAG_SHARES = (("overexposed", 0.1), ("underexposed", 0.5), ("scene_motion", 0.2),
+               ("lens_obscured", 0.05), ("dropped_frames", 0.0), ("low_contrast", 0.5))
+
+
+def condition_uncertainty(quality, noise_dn: float) -> float:
+    """Relative standard uncertainty of a window's rate beyond its counting statistics [-]
+    (:data:`CONDITION_UNCERTAINTY`): ``quality`` the window's flags, ``noise_dn`` the
+    frames' noise [gray levels]."""
+    if not ({"low_contrast", "scene_motion"} & set(quality)):
+        return BASE_UNCERTAINTY
+    lo, hi = CONDITION_NOISE_DN
+    x = float(noise_dn) if np.isfinite(noise_dn) else hi
+    t = min(max((x - lo) / (hi - lo), 0.0), 1.0)
+    return CONDITION_UNCERTAINTY[0] + t * (CONDITION_UNCERTAINTY[1] - CONDITION_UNCERTAINTY[0])
+
+
 #: Law-abiding streaks needed before the drop brightness E_r is trusted; frames are
 #: kept back (at most until the next record) until then.
 MATURE_BRIGHTNESS_SAMPLES = 30
@@ -662,7 +691,8 @@ class RainGauge:
             prepared = []
         # the backgrounds E_b behind the streaks (a neighbour frame): the drop sizes they leave
         # visible set this frame's sample volume (raingauge.gauge.volume.SampleVolume.kappa)
-        entry = [t, flags, rejected, self._last_mean_bg, background_histogram(prev)]
+        entry = [t, flags, rejected, self._last_mean_bg, background_histogram(prev),
+                 self._frame_noise_change / math.sqrt(1.5)]
         for c in prepared:
             c["vol"] = vol
             c["bg_hist"] = entry[4]
@@ -1230,6 +1260,9 @@ class RainGauge:
                 [d["diameter_m"] for d in drops], [d["velocity_m_s"] for d in drops],
                 [d["weight_s_m3"] for d in drops], duration,
                 empty_scale_mm_h=self._empty_scale * self.window_s / duration)
+        n_frames = max(len(frames), 1)
+        frame_flags = [flag for flag, share in FLAG_SHARES
+                       if sum(1 for fr in frames if flag in fr[1]) > share * n_frames]
         if drops and duration > 0:
             # a drop seen in several frames adds a snapshot estimate from each: the counting
             # statistics are those of the distinct drops (tracks), each with its summed share
@@ -1237,8 +1270,10 @@ class RainGauge:
             share = np.array([d["diameter_m"] ** 3 * d["velocity_m_s"] * d["weight_s_m3"] for d in drops])
             ok = np.isfinite(share) & (share > 0)
             per_drop = np.bincount(tracks[ok], 3.6e6 * math.pi / 6 * share[ok] / duration)
-            # the completeness probe's own sampling error adds to the sample volume's
-            systematic = 0.03
+            # beyond the counting: the scatter the validation found in this window's
+            # conditions, and the completeness probe's own sampling error
+            noises = [fr[5] for fr in frames if len(fr) > 5 and np.isfinite(fr[5])]
+            systematic = condition_uncertainty(frame_flags, float(np.median(noises)) if noises else float("nan"))
             if self.probe is not None:
                 probe_sd = self.probe.rate_relative_sd([0.5 * d["diameter_m"] for d in drops], share)
                 systematic = math.hypot(systematic, probe_sd)
@@ -1250,12 +1285,7 @@ class RainGauge:
         counted = prod["drops_counted"]
         if 0 < counted < self.min_drops or (counted == 0 and duration <= 0):
             quality.append("too_few_drops")
-        n_frames = max(len(frames), 1)
-        for flag, share in (("overexposed", 0.1), ("underexposed", 0.5), ("scene_motion", 0.2),
-                            ("lens_obscured", 0.05), ("dropped_frames", 0.0), ("low_contrast", 0.5)):
-            hits = sum(1 for fr in frames if flag in fr[1])
-            if hits > share * n_frames:
-                quality.append(flag)
+        quality += frame_flags
         if "dropped_frames" not in quality and any(a < t1 - 1e-9 and b > t0 + 1e-9 for a, b in self._gaps):
             # frames missing in the window, analysed or not (the rate counts only the time
             # observed; a long outage is not analysed at all)
