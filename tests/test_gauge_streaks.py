@@ -131,6 +131,27 @@ def test_pieces_of_one_streak_are_merged():
     assert np.count_nonzero(stats2[:, 4]) == 2
 
 
+def test_pieces_of_a_slanted_streak_are_merged_along_the_wind():
+    """A streak slanted by the wind (dx/dy = 0.6) and cut into three pieces is one label
+    when the detection knows the slant: its pieces are collinear along the fall, not in
+    x.  A parallel streak 12 px beside it stays apart, and without the slant the pieces
+    are not joined."""
+    shape = (140, 160)
+    img = capsule_change(shape, x0=30.0, y0=10.0, dx=66.0, dy=110.0, width=4.0, contrast=140.0)
+    for gap in (45, 80):
+        img[gap:gap + 3, :] = 0.0
+    beside = capsule_change(shape, x0=44.0, y0=15.0, dx=60.0, dy=100.0, width=4.0, contrast=140.0)
+    img = img + beside
+    lab0, st0 = detect_streaks(img.astype(np.float32), c=3.0, smooth_px=1, slope=0.0)
+    lab1, st1 = detect_streaks(img.astype(np.float32), c=3.0, smooth_px=1, slope=0.6)
+    assert np.count_nonzero(st0[:, 4]) == 4          # three pieces and the streak beside
+    assert np.count_nonzero(st1[:, 4]) == 2
+    # the merged streak holds every pixel of the three pieces
+    whole = capsule_change(shape, x0=30.0, y0=10.0, dx=66.0, dy=110.0, width=4.0, contrast=140.0) > 3.0
+    on = np.unique(lab1[whole & (lab1 > 0)])
+    assert on.size == 1 and st1[on[0], 4] > 0
+
+
 def test_clipped_streak_is_flagged():
     shape = (80, 50)
     img = capsule_change(shape, x0=25.0, y0=40.0, dx=0.0, dy=60.0, width=4.0, contrast=140.0)

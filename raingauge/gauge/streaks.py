@@ -756,28 +756,37 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
     big = np.nonzero(stats[:, 4] > 0)[0]
     # merge collinear pieces separated by a short vertical gap
     if big.size > 1 and merge_gap_px > 0:
-        _merge_pieces(labels, stats, big, merge_gap_px)
+        _merge_pieces(labels, stats, big, merge_gap_px, slope=slope)
     return labels, stats
 
 
-def _merge_pieces(labels: np.ndarray, stats: np.ndarray, big: np.ndarray, merge_gap_px: float) -> None:
-    """Merge collinear near-vertical pieces of one streak in place (labels and stats).
+def _merge_pieces(labels: np.ndarray, stats: np.ndarray, big: np.ndarray, merge_gap_px: float, *,
+                  slope: float = 0.0) -> None:
+    """Merge collinear pieces of one streak in place (labels and stats).
 
     Two pieces are joined when their centres lie within their widths of each other
-    across, the vertical gap between their boxes is at most ``merge_gap_px`` and their
-    widths agree within a factor 2.  A merged group keeps the label of one of its pieces
+    across the fall, the vertical gap between their boxes is at most ``merge_gap_px``
+    and their widths agree within a factor 2.  With the fall slanted by ``slope`` (dx/dy,
+    the wind; from 0.05 on, as the smoothing of :func:`detect_streaks`) the centres are
+    compared along it and the widths taken across it (a box's width less |slope| times
+    its height), and pieces whose boxes share up to 2 |slope| rows join too (the next
+    piece of a slanted streak can begin in the row where the last one ends, further
+    along).  A merged group keeps the label of one of its pieces
     (the root of a union over the pairs taken in a fixed order: by rank distance in x,
     then by piece), whose stats become the group's box and total area; the other pieces
     get area 0 and their pixels that label.  No loop over groups: the boxes come from
     grouped minima and maxima, the pixels are relabelled in one gather.
     """
     x, y, w, h = (stats[big, k].astype(float) for k in range(4))
-    cx = x + w / 2
+    s = float(slope) if abs(slope) >= 0.05 else 0.0
+    # across the fall: the centre where its line crosses row 0, the width less the slant
+    cx = x + w / 2 - s * (y + h / 2)
+    w = np.maximum(w - abs(s) * h, 1.0) if s else w
     order = np.argsort(cx, kind="stable")
     idx = big[order]
     cxs = cx[order]
     ys_, ws_, hs_ = y[order], w[order], h[order]
-    narrow = ws_ <= np.maximum(0.5 * hs_, 8.0)            # near-vertical pieces only
+    narrow = ws_ <= np.maximum(0.5 * hs_, 8.0)            # pieces along the fall only
     n_big = idx.size
     # candidate pairs (a, b > a) in cx order with cxs[b] - cxs[a] <= max(w_a, 3) + 2
     # (exact: half-integer centres, integer widths), listed by rank distance k = b - a, then a
@@ -790,7 +799,7 @@ def _merge_pieces(labels: np.ndarray, stats: np.ndarray, big: np.ndarray, merge_
     b_i = a_i + k_i
     gap = np.maximum(ys_[b_i] - (ys_[a_i] + hs_[a_i]), ys_[a_i] - (ys_[b_i] + hs_[b_i]))
     ratio = (ws_[a_i] + 1) / (ws_[b_i] + 1)
-    ok = narrow[a_i] & narrow[b_i] & (gap >= 0) & (gap <= merge_gap_px) & \
+    ok = narrow[a_i] & narrow[b_i] & (gap >= -round(2.0 * abs(s))) & (gap <= merge_gap_px) & \
         (np.abs(cxs[b_i] - cxs[a_i]) <= 0.5 * np.minimum(ws_[a_i], ws_[b_i]) + 1.5) & \
         (ratio >= 0.5) & (ratio <= 2.0)
     if not ok.any():
