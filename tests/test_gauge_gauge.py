@@ -188,16 +188,22 @@ def test_quality_flags_lens_and_motion():
         assert (flag in flags) == expected, (flag, expected, flags)
 
 
+def _noisy_window(seconds, background):
+    """30 mm/h of rain over ``background`` in 3 gray levels of noise, one window of the
+    gauge over the whole clip: (record, truth)."""
+    sim = pytest.importorskip("raingauge.render.simulator")
+    cam = CAM.replace(noise_sigma_dn=3.0)
+    frames, truth = sim.render_clip(cam, seconds=seconds, rain_rate_mm_h=30.0, background=background,
+                                    drop_brightness_dn=200.0, seed=5)
+    return _run_cam(cam, frames, window_s=seconds, step_s=seconds)[-1], truth
+
+
 def test_low_contrast_interval_says_so():
     """Drops barely brighter than a mid-gray background in 3 gray levels of noise are mostly
     lost: the record says so (``low_contrast``, the smallest drop it can see) and its 95 %
     interval is widened by the share of the rate such drops may carry, so it still covers
     the truth instead of confidently reading low."""
-    sim = pytest.importorskip("raingauge.render.simulator")
-    cam = CAM.replace(noise_sigma_dn=3.0)
-    frames, truth = sim.render_clip(cam, seconds=3.0, rain_rate_mm_h=30.0, background="uniform:112",
-                                    drop_brightness_dn=200.0, seed=5)
-    rec = _run_cam(cam, frames, window_s=3.0, step_s=3.0)[-1]
+    rec, truth = _noisy_window(3.0, "uniform:112")
     true_rate = truth["rain_rate_mm_h"]
     lo, hi = rec["rain_rate_ci95_mm_h"]
     assert "low_contrast" in rec["quality"]
@@ -205,9 +211,7 @@ def test_low_contrast_interval_says_so():
     assert lo <= true_rate <= hi and hi > 2.0 * rec["rain_rate_mm_h"]
     assert rec["min_detectable_diameter_mm"] > 1.0
     # a dark background in the same noise: every measurable size is seen, no widening
-    frames, truth = sim.render_clip(cam, seconds=1.0, rain_rate_mm_h=30.0, background="uniform:40",
-                                    drop_brightness_dn=200.0, seed=5)
-    rec = _run_cam(cam, frames, window_s=1.0, step_s=1.0)[-1]
+    rec, _truth = _noisy_window(1.0, "uniform:40")
     assert rec["min_detectable_diameter_mm"] < 0.5
     assert "low_contrast" not in rec["quality"]
 
@@ -229,11 +233,7 @@ def test_condition_uncertainty_follows_the_validation():
 def test_flagged_window_interval_carries_the_condition_uncertainty():
     """A textured scene in 3 gray levels of noise is flagged low_contrast; its interval
     reaches at least 1.96 x 40 % of the reading on either side (the counting adds to it)."""
-    sim = pytest.importorskip("raingauge.render.simulator")
-    cam = CAM.replace(noise_sigma_dn=3.0)
-    frames, _truth = sim.render_clip(cam, seconds=2.0, rain_rate_mm_h=30.0, background="skimage:brick",
-                                     drop_brightness_dn=200.0, seed=5)
-    rec = _run_cam(cam, frames, window_s=2.0, step_s=2.0)[-1]
+    rec, _truth = _noisy_window(2.0, "skimage:brick")
     rate = rec["rain_rate_mm_h"]
     lo, hi = rec["rain_rate_ci95_mm_h"]
     assert "low_contrast" in rec["quality"] and rate > 0
