@@ -59,6 +59,28 @@ def test_pass_probability_table_matches_the_model(volume, a_mm, contrast, noise)
     assert kap == pytest.approx(float(volume.kappa(a, contrast_dn=contrast, noise_dn=noise)), rel=0.15)
 
 
+def test_pass_probability_over_pixels_is_their_mean(volume):
+    """p averaged over the pixels behind a drop through their contrast weights (the average
+    kappa makes over a frame) is the mean of p over the pixels, taken one by one; a
+    uniform background gives p at its contrast, and pixels darker than the drop's
+    brightness by less than the grid's lowest contrast hide it."""
+    a, z, noise = 0.7e-3, CAM.focus_distance_m * 1.01, 1.5
+    rng = np.random.default_rng(3)
+    contrasts = np.concatenate([rng.uniform(25.0, 180.0, 200), [1.0, 2.0]])
+    one_by_one = np.mean([volume.pass_probability_at(a, z, c, noise) for c in contrasts])
+    over = volume.pass_probability_over(a, z, volume.contrast_weights(contrasts), noise)
+    assert over == pytest.approx(one_by_one, rel=1e-9, abs=1e-12)
+    assert volume.pass_probability_over(a, z, volume.contrast_weights([90.0]), noise) == pytest.approx(
+        volume.pass_probability_at(a, z, 90.0, noise), rel=1e-9)
+    # p is not linear in the contrast: the mean over a two-level background differs from
+    # p at its mean contrast
+    two = volume.contrast_weights([30.0, 150.0])
+    mixed = volume.pass_probability_over(a, z, two, noise)
+    assert mixed == pytest.approx(0.5 * (volume.pass_probability_at(a, z, 30.0, noise)
+                                         + volume.pass_probability_at(a, z, 150.0, noise)), rel=1e-9)
+    assert abs(mixed - volume.pass_probability_at(a, z, 90.0, noise)) > 0.01
+
+
 def test_plan_keeps_clear_of_detected_streaks(volume):
     probe = _probe(volume, per_frame=12)
     occupied = np.zeros(CAM.shape, bool)

@@ -741,8 +741,10 @@ class RainGauge:
             behind = frames[0][int(p["p0"][1]):int(p["p1"][1]) + 1, max(xa, 0):xb]
             kap = float(vol.kappa(p["radius_m"], weights=weights, noise_dn=noise_dn))
             if behind.size and kap >= floor:
-                c_drop = min(e_r, self._white_dn) - float(behind.mean())
-                p_pass[j] = vol.pass_probability_at(p["radius_m"], p["depth_m"], c_drop, noise_dn)
+                # p over the pixels behind the drop, averaged as kappa averages it over the
+                # frame's pixels: the ratio then corrects that kappa and no other model of it
+                local = vol.contrast_weights(min(e_r, self._white_dn) - behind)
+                p_pass[j] = vol.pass_probability_over(p["radius_m"], p["depth_m"], local, noise_dn)
                 expected[j] = p_pass[j] * (2.0 * p["radius_m"]) ** 3 * p["velocity_m_s"] / kap
         # what the gauge makes of each injected drop: its share of the rate,
         # (2 a)^3 v / kappa(a) with a, v and kappa as measured (0 when it is not counted)

@@ -777,6 +777,29 @@ class SampleVolume:
             out += wk * float((1 - tz) * val[0] + tz * val[-1])
         return out
 
+    def pass_probability_over(self, radius_m: float, z_m: float, weights,
+                              noise_dn: float | None = None) -> float:
+        """p(a, z) averaged over the contrasts of a set of background pixels [-].
+
+        ``weights`` are their :meth:`contrast_weights`, the same average over pixels
+        that turns ``kappa_table`` into a frame's kappa: an expectation built from
+        it belongs to the same model as that kappa.  Between the grid's contrasts
+        p is linear in log C, as in :meth:`pass_probability_at`, so the sum over
+        the grid's nodes is the mean of p over the pixels.
+
+        Parameters
+        ----------
+        radius_m, z_m : float
+            Drop radius a and depth z [m].
+        weights : (n_contrasts,) array
+            :meth:`contrast_weights` of the pixels behind the drop.
+        noise_dn : float, optional
+            The frame's noise (default the profile's) [gray levels].
+        """
+        w = np.asarray(weights, dtype=float)
+        return float(sum(w[k] * self.pass_probability_at(radius_m, z_m, float(self.contrasts_dn[k]), noise_dn)
+                         for k in np.flatnonzero(w > 0)))
+
     def true_radius_m(self, apparent_radius_m) -> np.ndarray:
         """Invert a' = a F(a): the drop radius behind an apparent radius at z0 [m]."""
         app = self.radii_m * self.apparent_radius_factor
