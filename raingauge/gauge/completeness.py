@@ -236,9 +236,10 @@ class CompletenessProbe:
             counted of it (0: not counted) [m^4/s / (m^3/px^2)].
         expected : (n,) array
             Per drop, the same as the model of the sample volume expects it:
-            p(a, z, C, sigma) (2 a)^3 v / kappa(a) (C the contrast behind the drop).
+            p(a, z, C, sigma) (2 a)^3 v / kappa(a), p averaged over the contrasts C of the
+            pixels behind the drop as kappa averages it over the frame's pixels.
         p_pass : (n,) array
-            Per drop, the model's p(a, z, C, sigma) alone [-].
+            Per drop, the model's p(a, z, C, sigma) alone, so averaged [-].
         """
         f = self.profile.focal_length_px
         for p, est, exp_, pp in zip(plan, estimate, expected, p_pass):

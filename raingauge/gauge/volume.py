@@ -571,8 +571,7 @@ class SampleVolume:
         lc = np.log(np.clip(c[seen], self.contrasts_dn[0], self.contrasts_dn[-1]))
         i = np.clip(np.searchsorted(grid, lc, side="right") - 1, 0, grid.size - 2)
         t = np.clip((lc - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0)
-        np.add.at(out, i, 1.0 - t)
-        np.add.at(out, i + 1, t)
+        out = np.bincount(i, 1.0 - t, minlength=grid.size) + np.bincount(i + 1, t, minlength=grid.size)
         return out / c.size
 
     def histogram_weights(self, histogram, drop_brightness_dn: float) -> np.ndarray:
@@ -797,8 +796,31 @@ class SampleVolume:
             The frame's noise (default the profile's) [gray levels].
         """
         w = np.asarray(weights, dtype=float)
-        return float(sum(w[k] * self.pass_probability_at(radius_m, z_m, float(self.contrasts_dn[k]), noise_dn)
-                         for k in np.flatnonzero(w > 0)))
+        la = math.log(max(float(radius_m), 1e-9))
+        lr = self._log_radii
+        j = int(np.clip(np.searchsorted(lr, la, side="right") - 1, 0, lr.size - 2))
+        tr = min(max((la - lr[j]) / (lr[j + 1] - lr[j]), 0.0, ), 1.0)
+        if noise_dn is None or not np.isfinite(noise_dn):
+            i_n, tn = 0, 0.0
+        else:
+            x = float(np.clip(noise_dn, self.noises_dn[0], self.noises_dn[-1]))
+            i_n = int(np.clip(np.searchsorted(self.noises_dn, x, side="right") - 1, 0, self.noises_dn.size - 2))
+            tn = (x - self.noises_dn[i_n]) / (self.noises_dn[i_n + 1] - self.noises_dn[i_n])
+        # p at every contrast of the grid (the nodes the weights sit on), as pass_probability_at
+        nodes = np.zeros(self.contrasts_dn.size)
+        for k, wk in ((j, 1.0 - tr), (j + 1, tr)):
+            if wk <= 0.0:
+                continue
+            z, p = self._p_z[k]
+            zf = float(z_m)
+            if not z[0] <= zf <= z[-1]:
+                continue
+            iz = min(int((zf - z[0]) / (z[1] - z[0])), z.size - 2)
+            tz = (zf - z[iz]) / (z[iz + 1] - z[iz])
+            blk = p[i_n:i_n + 2, :, iz:iz + 2].astype(np.float64)
+            val = (1 - tn) * blk[0] + tn * blk[-1]
+            nodes += wk * ((1 - tz) * val[:, 0] + tz * val[:, -1])
+        return float(w @ nodes)
 
     def true_radius_m(self, apparent_radius_m) -> np.ndarray:
         """Invert a' = a F(a): the drop radius behind an apparent radius at z0 [m]."""
