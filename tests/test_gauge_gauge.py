@@ -455,6 +455,51 @@ def test_drop_brightness_is_the_fixed_point_of_the_percentile():
             assert drop_brightness_dn(x, b, q_min=q_min, q_ref=1.0, percentile=pct) == literal(x, b, q_min, pct)
 
 
+def test_drop_brightness_with_a_reference_that_follows_the_contrast():
+    """With q_ref a function of the contrast the estimate's contrast C solves C = D / q(C)
+    (D the percentile fixed point of the samples); a constant function gives the same
+    estimate as the constant."""
+    from raingauge.gauge.gauge import drop_brightness_dn
+
+    rng = np.random.default_rng(5)
+    b = rng.normal(150.0, 3.0, 800)
+    x = b + 80.0 * np.clip(rng.normal(0.95, 0.1, 800), 0, None)
+    const = drop_brightness_dn(x, b, q_ref=0.93)
+    assert drop_brightness_dn(x, b, q_ref=lambda c: 0.93) == pytest.approx(const, rel=1e-12)
+
+    def q_of(c):
+        return 0.9 if c is None else 0.9 + 0.002 * (160.0 - c)
+
+    e_r = drop_brightness_dn(x, b, q_ref=q_of)
+    d = (const - float(np.median(b))) * 0.93          # the samples' fixed point D
+    c = e_r - float(np.median(b))
+    assert c == pytest.approx(d / q_of(c), rel=1e-4)
+    assert e_r < const                                  # q rises as C falls below 160
+
+
+def test_gauge_estimates_the_drop_brightness_over_a_bright_noisy_sky():
+    """Over a bright sky (E_r - E_b about 80 gray levels) with noise 3 the errors of the
+    measured focus lift the brightness samples more than at the volume's nominal contrast:
+    the estimate that takes the reference at its own contrast lands within 2.5 gray levels
+    of the simulator's E_r, nearer than the reference at the nominal contrast puts it."""
+    sim = pytest.importorskip("raingauge.render.simulator")
+    from raingauge.gauge.gauge import BRIGHTNESS_PERCENTILE, drop_brightness_dn
+
+    cam = CAM.replace(width_px=480, height_px=270, noise_sigma_dn=3.0)
+    frames, _ = sim.render_clip(cam, seconds=40.0, rain_rate_mm_h=10.0, seed=1, background="ramp:150:190",
+                                drop_brightness_dn=250.0)
+    g = RainGauge(cam, velocity_model="gunn_kinzer", completeness_probe=False)
+    for fr in frames:
+        g.process(fr)
+    est = g.drop_brightness_estimate_dn
+    assert est == pytest.approx(250.0, abs=2.5)
+    noise = float(np.median(g._noise_log))
+    backgrounds, samples = g._brightness.arrays()
+    nominal = drop_brightness_dn(samples, backgrounds, q_min=g.volume.q_min, q_ref=g.volume.brightness_q_at(noise),
+                                 percentile=BRIGHTNESS_PERCENTILE)
+    assert abs(est - 250.0) < abs(nominal - 250.0)
+
+
 def test_gauge_keeps_the_latest_brightness_samples():
     """The gauge's brightness samples are the latest BRIGHTNESS_SAMPLES pairs, whatever the
     batches they came in."""

@@ -310,6 +310,27 @@ def test_noisier_frames_sample_small_drops_less(volume):
     assert noisy[1] > 0.7 * quiet[1]
 
 
+def test_brightness_reference_follows_the_contrast(volume):
+    """The reference q of the E_r estimate at another drop contrast: the same as at the
+    volume's own contrast there, larger as the contrast falls against the noise (the errors
+    of q' grow, and faint streaks are seen where they are brightest), and the same as a
+    volume built for that contrast (independent computation, on the full grid of q')
+    within 0.005."""
+    noise = float(volume.noises_dn[2])
+    c0 = volume.contrast_dn
+    assert volume.brightness_q_at(noise, c0) == volume.brightness_q_at(noise)
+    assert volume.brightness_q_at(noise, None) == volume.brightness_q_at(noise)
+    qs = [volume.brightness_q_at(noise, c) for c in (c0, 0.7 * c0, 0.5 * c0, 0.3 * c0)]
+    assert np.all(np.diff(qs) > 0)
+    for c in (0.5 * c0, 0.3 * c0):
+        other = SampleVolume(CAM, velocity_model="gunn_kinzer", contrast_dn=c)
+        assert volume.brightness_q_at(noise, c) == pytest.approx(other.brightness_q_at(noise), abs=0.005)
+    # between the half-octave nodes the reference moves smoothly
+    grid = np.geomspace(0.3 * c0, c0, 25)
+    q = np.array([volume.brightness_q_at(noise, c) for c in grid])
+    assert np.max(np.abs(np.diff(q))) < 0.02
+
+
 def test_brightness_reference_from_the_model(volume):
     """The model's reference for the E_r estimate: the focus test's share of law-abiding
     streaks (p <= p_law), q = (2 a_i / w')^2 with its error, and the percentile fixed point

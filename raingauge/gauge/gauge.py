@@ -292,8 +292,11 @@ def drop_brightness_dn(samples_dn, background_dn, *, q_min: float = 0.6, q_ref: 
         E_b behind each streak [gray levels].
     q_min : float
         Photometric focus of the defocus test [-].
-    q_ref : float
-        The model's fixed point of the percentile, as a fraction of E_r - E_b [-].
+    q_ref : float or callable
+        The model's fixed point of the percentile, as a fraction of E_r - E_b [-]; or that
+        fraction as a function of the contrast E_r - E_b [gray levels] (the errors of q'
+        grow as the contrast falls), and the contrast is then the fixed point
+        C = D / q_ref(C).
     percentile : float
         Percentile P [%].
     iterations : int
@@ -323,7 +326,17 @@ def drop_brightness_dn(samples_dn, background_dn, *, q_min: float = 0.6, q_ref: 
             e = e_new
             break
         e = e_new
-    return float(np.median(b)) + e / float(q_ref)
+    if not callable(q_ref):
+        return float(np.median(b)) + e / float(q_ref)
+    # C = e / q(C): q falls slowly with C (the map contracts), a few steps suffice
+    c = e / float(q_ref(None))
+    for _ in range(20):
+        c_new = e / float(q_ref(c))
+        if abs(c_new - c) <= 1e-3:
+            c = c_new
+            break
+        c = c_new
+    return float(np.median(b)) + c
 
 
 def _percentile_of_sorted(s: np.ndarray, lo: int, percentile: float) -> float:
@@ -1103,24 +1116,23 @@ class RainGauge:
         """Whether E_r is given or has at least ``n_samples`` brightness samples behind it."""
         return self.fixed_drop_brightness_dn is not None or len(self._brightness) >= n_samples
 
-    def _brightness_q(self) -> float:
-        """The sample volume's :attr:`~raingauge.gauge.volume.SampleVolume.brightness_q` at
-        the median noise of the recent frames [-]."""
+    def _brightness_q_of_contrast(self):
+        """The sample volume's q_ref (:meth:`~raingauge.gauge.volume.SampleVolume.brightness_q_at`)
+        at the median noise of the recent frames, as a function of the drop contrast [gray
+        levels] (None: the volume's nominal contrast), and a key of it."""
         vol = self.volume
-        if not hasattr(vol, "brightness_q_at"):
-            return 1.0
         noise = float(np.median(self._noise_log)) if self._noise_log else None
-        return vol.brightness_q_at(noise)
+        return (lambda c: vol.brightness_q_at(noise, c)), (id(vol), noise)
 
     def _drop_brightness(self) -> float:
         """The drop brightness E_r [gray levels] from the law-abiding streaks' samples
         (:func:`drop_brightness_dn`)."""
         if self.fixed_drop_brightness_dn is not None:
             return self.fixed_drop_brightness_dn
-        q_ref = self._brightness_q()
+        q_ref, q_key = self._brightness_q_of_contrast()
         # the same samples give the same estimate: computed once per new sample set (the
         # last sample is alive in the deque, so its identity marks the set)
-        key = (self._brightness.version, q_ref)
+        key = (self._brightness.version, q_key)
         cached = getattr(self, "_brightness_cache", None)
         if cached is not None and cached[0] == key:
             return cached[1]

@@ -288,7 +288,31 @@ BRIGHTNESS_MIN_WIDTH_PX = 2.5
 BRIGHTNESS_PRIOR_RATE_MM_H = 10.0
 
 
-def _brightness_percentile_q(parts, q_min: float, *, percentile: float = BRIGHTNESS_PERCENTILE) -> float:
+#: Range of the contrasts of :meth:`SampleVolume.brightness_q_at`, in half octaves about
+#: the volume's ``contrast_dn`` (beyond it the nearest end holds) [-].
+BRIGHTNESS_Q_NODES = (-8, 2)
+
+
+def _brightness_parts(res, z, f: float, z0: float) -> tuple:
+    """(law-abiding weight over z [m^3/px^2], q(z), sigma_q(z)), each (n_noises, n_z), of one
+    radius from :func:`pass_probability` at one contrast: the input of
+    :func:`_brightness_percentile_q` (streaks narrower than :data:`BRIGHTNESS_MIN_WIDTH_PX`
+    give no brightness sample)."""
+    shp = np.broadcast_shapes(*(np.shape(res[k]) for k in ("p_law", "q", "q_sigma", "apparent_radius_m")),
+                              np.shape(z))
+    dz = z[1] - z[0]
+    w_app_z = np.broadcast_to(res["apparent_radius_m"], shp) * 2.0 * f / z0
+    law = np.broadcast_to(res["p_law"], shp) * (z / f) ** 2 * dz
+    return (np.where(w_app_z >= BRIGHTNESS_MIN_WIDTH_PX, law, 0.0), np.broadcast_to(res["q"], shp),
+            np.broadcast_to(res["q_sigma"], shp))
+
+
+#: The grid of q' of the contrast nodes of :meth:`SampleVolume.brightness_q_at` [-].
+_Q_GRID_COARSE = np.linspace(0.0, 2.0, 201)
+
+
+def _brightness_percentile_q(parts, q_min: float, *, percentile: float = BRIGHTNESS_PERCENTILE,
+                             y: np.ndarray | None = None) -> float:
     """The fixed point m = P{ q' : q' >= q_min m } of the model's measured focus q' [-].
 
     ``parts``: (radius a [m], law-abiding weight over z [m^3/px^2], q(z), sigma_q(z)) per
@@ -301,7 +325,7 @@ def _brightness_percentile_q(parts, q_min: float, *, percentile: float = BRIGHTN
     prior = MarshallPalmer(BRIGHTNESS_PRIOR_RATE_MM_H).number_density(2.0 * radii)
     # the radius grid is log-spaced: da is proportional to a
     size_w = prior * radii
-    y = np.linspace(0.0, 2.0, 801)
+    y = np.linspace(0.0, 2.0, 801) if y is None else y
     dens = np.zeros_like(y)
     for (a, wt, q, sq), sw in zip(parts, size_w):
         ok = (wt > 0) & np.isfinite(q) & np.isfinite(sq) & (sq > 0)
@@ -488,6 +512,8 @@ class SampleVolume:
                                pixel_pitch_m=_pitch(prof))
         table, zbar, fac, spans, p_z = [], [], [], [], []
         q_parts = []
+        self._z_ranges = []
+        self._q_nodes = {}
         for a in self.radii_m:
             # the accepted drops lie where the blur is at most about the width (q >= q_min):
             # integrate over that span, generously widened
@@ -496,6 +522,7 @@ class SampleVolume:
             lo = z_all[max(near[0] - 1, 0)] if near.size else 0.9 * z0
             hi = z_all[min(near[-1] + 1, z_all.size - 1)] if near.size else 1.1 * z0
             z = np.linspace(lo, hi, 400)
+            self._z_ranges.append((lo, hi))
             dz = z[1] - z[0]
             res = pass_probability(a, z[None, None, :], prof, velocity_model=self.velocity_model,
                                    rain_velocity_model=self.rain_velocity_model, floor=self.floor,
@@ -512,11 +539,10 @@ class SampleVolume:
             on = np.nonzero(p_any > 1e-3 * p_any.max())[0] if p_any.max() > 0 else np.zeros(0, int)
             spans.append((z[max(on[0] - 2, 0)], z[min(on[-1] + 2, z.size - 1)]) if on.size else (z0, z0))
             if self.defocus_model == "uniform":
-                shp = res["p"].shape
-                w_app_z = np.broadcast_to(res["apparent_radius_m"], shp)[:, -1] * 2.0 * f / z0
-                law = np.broadcast_to(res["p_law"], shp)[:, -1] * (z / f) ** 2 * dz
-                q_parts.append((a, np.where(w_app_z >= BRIGHTNESS_MIN_WIDTH_PX, law, 0.0),
-                                np.broadcast_to(res["q"], shp)[:, -1], np.broadcast_to(res["q_sigma"], shp)[:, -1]))
+                # at the nominal contrast (the table's last column)
+                nominal = {key: np.broadcast_to(res[key], res["p"].shape)[:, -1]
+                           for key in ("apparent_radius_m", "p_law", "q", "q_sigma")}
+                q_parts.append((a,) + _brightness_parts(nominal, z, f, z0))
             table.append(k)
             kd, wd = float(k[0, -1]), wt[0, -1]
             if kd > 0:
@@ -655,12 +681,76 @@ class SampleVolume:
         t = (x - self.noises_dn[i]) / (self.noises_dn[i + 1] - self.noises_dn[i])
         return (1.0 - t) * self.kappa_cube[:, i, :] + t * self.kappa_cube[:, i + 1, :]
 
-    def brightness_q_at(self, noise_dn=None) -> float:
+    def brightness_q_at(self, noise_dn=None, contrast_dn=None) -> float:
         """:attr:`brightness_q` at a frame noise [gray levels] (linear between the grid's;
-        default the profile's) [-]."""
-        if noise_dn is None or not np.isfinite(noise_dn):
-            return self.brightness_q
-        return float(np.interp(noise_dn, self.noises_dn, self.brightness_q_by_noise))
+        default the profile's) and a drop contrast E_r - E_b [gray levels] (default
+        ``contrast_dn``) [-].
+
+        The errors of the measured focus q' grow as the noise over the contrast, and a
+        faint streak is detected only where it is brighter than its mean: on a bright
+        background the percentile of q' lies further above the in-focus q = 1.  Other
+        contrasts than ``contrast_dn`` are computed on a grid of half octaves about it
+        (:data:`BRIGHTNESS_Q_NODES`, each node when first needed), as the factor by which
+        the percentile there differs from that at ``contrast_dn``, interpolated in log C.
+        """
+        noise = None if noise_dn is None or not np.isfinite(noise_dn) else float(noise_dn)
+        base = self.brightness_q if noise is None else float(np.interp(noise, self.noises_dn,
+                                                                      self.brightness_q_by_noise))
+        if contrast_dn is None or not np.isfinite(contrast_dn) or contrast_dn == self.contrast_dn:
+            return base
+        if self.defocus_model != "uniform":
+            return base
+        x = 2.0 * math.log2(max(float(contrast_dn), 1.0) / self.contrast_dn)    # in half octaves
+        x = min(max(x, float(BRIGHTNESS_Q_NODES[0])), float(BRIGHTNESS_Q_NODES[1]))
+        k = min(math.floor(x), BRIGHTNESS_Q_NODES[1] - 1)
+        t = x - k
+        # the noise grid's two nodes about the frame's noise, linear weights
+        if noise is None:
+            i_n, tn = 0, 0.0
+        else:
+            xn = min(max(noise, self.noises_dn[0]), self.noises_dn[-1])
+            i_n = int(np.clip(np.searchsorted(self.noises_dn, xn, side="right") - 1, 0, self.noises_dn.size - 2))
+            tn = (xn - self.noises_dn[i_n]) / (self.noises_dn[i_n + 1] - self.noises_dn[i_n])
+
+        def at(node):
+            out = 0.0
+            for i, w in ((i_n, 1.0 - tn), (i_n + 1, tn)):
+                if w > 0.0:
+                    out += w * self._brightness_q_node(node, i) / self._brightness_q_node(0, i)
+            return out
+
+        factor = (1.0 - t) * at(k) + (t * at(k + 1) if t > 0.0 else 0.0)
+        return float(base * factor)
+
+    def _brightness_q_node(self, node: int, i_noise: int) -> float:
+        """The percentile of q' (:func:`_brightness_percentile_q`, on a coarser grid of q')
+        at the contrast ``contrast_dn`` 2^(node / 2) and the noise ``noises_dn[i_noise]``
+        [-], computed when first asked for."""
+        key = (node, i_noise)
+        hit = self._q_nodes.get(key)
+        if hit is not None:
+            return hit
+        parts = self._q_nodes.get(("parts", node))
+        if parts is None:
+            prof = self.profile
+            f = prof.focal_length_px
+            z0 = prof.focus_distance_m
+            contrast = self.contrast_dn * 2.0 ** (0.5 * node)
+            parts = []
+            for a, (lo, hi) in zip(self.radii_m, self._z_ranges):
+                z = np.linspace(lo, hi, 400)
+                res = pass_probability(a, z[None, :], prof, velocity_model=self.velocity_model,
+                                       rain_velocity_model=self.rain_velocity_model, floor=self.floor,
+                                       k_sigma=self.k_sigma, blur_variance_factor=self.blur_variance_factor,
+                                       defocus_model=self.defocus_model, q_min=self.q_min, contrast_dn=contrast,
+                                       noise_sigma_dn=self.noises_dn[:, None],
+                                       detection_threshold_dn=self.detection_threshold_dn, grow=self.grow)
+                parts.append((a,) + _brightness_parts(res, z, f, z0))
+            self._q_nodes[("parts", node)] = parts
+        val = _brightness_percentile_q([(a, wt[i_noise], q[i_noise], sq[i_noise]) for a, wt, q, sq in parts],
+                                       self.q_min, y=_Q_GRID_COARSE)
+        self._q_nodes[key] = float(val)
+        return float(val)
 
     def kappa(self, radius_m, contrast_dn=None, *, weights=None, noise_dn=None) -> np.ndarray:
         """kappa(a) [m^3 per px^2 of image], 0 below the measurable size.
