@@ -512,8 +512,9 @@ class SampleVolume:
                                pixel_pitch_m=_pitch(prof))
         table, zbar, fac, spans, p_z = [], [], [], [], []
         q_parts = []
-        self._z_ranges = []
         self._q_nodes = {}
+        self._q_node_parts = []
+        node_c = self.contrast_dn * 2.0 ** (0.5 * np.arange(BRIGHTNESS_Q_NODES[0], BRIGHTNESS_Q_NODES[1] + 1))
         for a in self.radii_m:
             # the accepted drops lie where the blur is at most about the width (q >= q_min):
             # integrate over that span, generously widened
@@ -522,7 +523,6 @@ class SampleVolume:
             lo = z_all[max(near[0] - 1, 0)] if near.size else 0.9 * z0
             hi = z_all[min(near[-1] + 1, z_all.size - 1)] if near.size else 1.1 * z0
             z = np.linspace(lo, hi, 400)
-            self._z_ranges.append((lo, hi))
             dz = z[1] - z[0]
             res = pass_probability(a, z[None, None, :], prof, velocity_model=self.velocity_model,
                                    rain_velocity_model=self.rain_velocity_model, floor=self.floor,
@@ -543,6 +543,18 @@ class SampleVolume:
                 nominal = {key: np.broadcast_to(res[key], res["p"].shape)[:, -1]
                            for key in ("apparent_radius_m", "p_law", "q", "q_sigma")}
                 q_parts.append((a,) + _brightness_parts(nominal, z, f, z0))
+                # and at the contrasts of brightness_q_at's nodes, every few depths (kept for
+                # the fixed points computed when first needed)
+                zs = z[::P_TABLE_STRIDE]
+                res_n = pass_probability(a, zs[None, None, :], prof, velocity_model=self.velocity_model,
+                                         rain_velocity_model=self.rain_velocity_model, floor=self.floor,
+                                         k_sigma=self.k_sigma, blur_variance_factor=self.blur_variance_factor,
+                                         defocus_model=self.defocus_model, q_min=self.q_min,
+                                         contrast_dn=node_c[None, :, None],
+                                         noise_sigma_dn=self.noises_dn[:, None, None],
+                                         detection_threshold_dn=self.detection_threshold_dn, grow=self.grow)
+                self._q_node_parts.append((a,) + tuple(x.astype(np.float32)
+                                                       for x in _brightness_parts(res_n, zs, f, z0)))
             table.append(k)
             kd, wd = float(k[0, -1]), wt[0, -1]
             if kd > 0:
@@ -723,34 +735,20 @@ class SampleVolume:
         return float(base * factor)
 
     def _brightness_q_node(self, node: int, i_noise: int) -> float:
-        """The percentile of q' (:func:`_brightness_percentile_q`, on a coarser grid of q')
-        at the contrast ``contrast_dn`` 2^(node / 2) and the noise ``noises_dn[i_noise]``
-        [-], computed when first asked for."""
+        """The percentile of q' (:func:`_brightness_percentile_q`, on every
+        :data:`P_TABLE_STRIDE`-th depth and a coarser grid of q') at the contrast
+        ``contrast_dn`` 2^(node / 2) and the noise ``noises_dn[i_noise]`` [-], computed
+        when first asked for."""
         key = (node, i_noise)
         hit = self._q_nodes.get(key)
         if hit is not None:
             return hit
-        parts = self._q_nodes.get(("parts", node))
-        if parts is None:
-            prof = self.profile
-            f = prof.focal_length_px
-            z0 = prof.focus_distance_m
-            contrast = self.contrast_dn * 2.0 ** (0.5 * node)
-            parts = []
-            for a, (lo, hi) in zip(self.radii_m, self._z_ranges):
-                z = np.linspace(lo, hi, 400)
-                res = pass_probability(a, z[None, :], prof, velocity_model=self.velocity_model,
-                                       rain_velocity_model=self.rain_velocity_model, floor=self.floor,
-                                       k_sigma=self.k_sigma, blur_variance_factor=self.blur_variance_factor,
-                                       defocus_model=self.defocus_model, q_min=self.q_min, contrast_dn=contrast,
-                                       noise_sigma_dn=self.noises_dn[:, None],
-                                       detection_threshold_dn=self.detection_threshold_dn, grow=self.grow)
-                parts.append((a,) + _brightness_parts(res, z, f, z0))
-            self._q_nodes[("parts", node)] = parts
-        val = _brightness_percentile_q([(a, wt[i_noise], q[i_noise], sq[i_noise]) for a, wt, q, sq in parts],
-                                       self.q_min, y=_Q_GRID_COARSE)
-        self._q_nodes[key] = float(val)
-        return float(val)
+        j = node - BRIGHTNESS_Q_NODES[0]
+        val = float(_brightness_percentile_q([(a, wt[i_noise, j], q[i_noise, j], sq[i_noise, j])
+                                              for a, wt, q, sq in self._q_node_parts], self.q_min,
+                                             y=_Q_GRID_COARSE))
+        self._q_nodes[key] = val
+        return val
 
     def kappa(self, radius_m, contrast_dn=None, *, weights=None, noise_dn=None) -> np.ndarray:
         """kappa(a) [m^3 per px^2 of image], 0 below the measurable size.
