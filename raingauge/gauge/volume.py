@@ -688,9 +688,7 @@ class SampleVolume:
         """kappa(a, C) (n_radii, n_contrasts) at a frame noise, linear between the grid's."""
         if noise_dn is None or not np.isfinite(noise_dn):
             return self.kappa_table
-        x = float(np.clip(noise_dn, self.noises_dn[0], self.noises_dn[-1]))
-        i = int(np.clip(np.searchsorted(self.noises_dn, x, side="right") - 1, 0, self.noises_dn.size - 2))
-        t = (x - self.noises_dn[i]) / (self.noises_dn[i + 1] - self.noises_dn[i])
+        i, t = self._noise_bracket(noise_dn)
         return (1.0 - t) * self.kappa_cube[:, i, :] + t * self.kappa_cube[:, i + 1, :]
 
     def brightness_q_at(self, noise_dn=None, contrast_dn=None) -> float:
@@ -717,12 +715,7 @@ class SampleVolume:
         k = min(math.floor(x), BRIGHTNESS_Q_NODES[1] - 1)
         t = x - k
         # the noise grid's two nodes about the frame's noise, linear weights
-        if noise is None:
-            i_n, tn = 0, 0.0
-        else:
-            xn = min(max(noise, self.noises_dn[0]), self.noises_dn[-1])
-            i_n = int(np.clip(np.searchsorted(self.noises_dn, xn, side="right") - 1, 0, self.noises_dn.size - 2))
-            tn = (xn - self.noises_dn[i_n]) / (self.noises_dn[i_n + 1] - self.noises_dn[i_n])
+        i_n, tn = self._noise_bracket(noise)
 
         def at(node):
             out = 0.0
@@ -830,11 +823,7 @@ class SampleVolume:
         noise_dn : float, optional
             The frame's noise (default the profile's) [gray levels].
         """
-        la = math.log(max(float(radius_m), 1e-9))
-        lr = self._log_radii
-        j = int(np.clip(np.searchsorted(lr, la, side="right") - 1, 0, lr.size - 2))
-        tr = min(max((la - lr[j]) / (lr[j + 1] - lr[j]), 0.0, ), 1.0)
-        # the two contrasts and the two noises of the grid around the drop's, linear weights
+        # the two contrasts of the grid around the drop's, linear weights in log C
         cgrid = self._log_contrasts
         c = float(contrast_dn)
         if not c >= self.contrasts_dn[0]:
@@ -842,13 +831,27 @@ class SampleVolume:
         lc = math.log(min(c, self.contrasts_dn[-1]))
         ic = int(np.clip(np.searchsorted(cgrid, lc, side="right") - 1, 0, cgrid.size - 2))
         tc = min(max((lc - cgrid[ic]) / (cgrid[ic + 1] - cgrid[ic]), 0.0), 1.0)
+        nodes = self._p_nodes(radius_m, z_m, noise_dn)
+        return float((1 - tc) * nodes[ic] + tc * nodes[ic + 1])
+
+    def _noise_bracket(self, noise_dn) -> tuple[int, float]:
+        """The noise grid's node below a frame noise and the linear weight of the one above
+        (node 0, weight 0 for None: the profile's noise)."""
         if noise_dn is None or not np.isfinite(noise_dn):
-            i_n, tn = 0, 0.0
-        else:
-            x = float(np.clip(noise_dn, self.noises_dn[0], self.noises_dn[-1]))
-            i_n = int(np.clip(np.searchsorted(self.noises_dn, x, side="right") - 1, 0, self.noises_dn.size - 2))
-            tn = (x - self.noises_dn[i_n]) / (self.noises_dn[i_n + 1] - self.noises_dn[i_n])
-        out = 0.0
+            return 0, 0.0
+        x = float(np.clip(noise_dn, self.noises_dn[0], self.noises_dn[-1]))
+        i_n = int(np.clip(np.searchsorted(self.noises_dn, x, side="right") - 1, 0, self.noises_dn.size - 2))
+        return i_n, (x - self.noises_dn[i_n]) / (self.noises_dn[i_n + 1] - self.noises_dn[i_n])
+
+    def _p_nodes(self, radius_m: float, z_m: float, noise_dn) -> np.ndarray:
+        """p(a, z) at every contrast of the grid, from the table the volume integrated
+        (linear in log a, the noise and z) [-]."""
+        la = math.log(max(float(radius_m), 1e-9))
+        lr = self._log_radii
+        j = int(np.clip(np.searchsorted(lr, la, side="right") - 1, 0, lr.size - 2))
+        tr = min(max((la - lr[j]) / (lr[j + 1] - lr[j]), 0.0, ), 1.0)
+        i_n, tn = self._noise_bracket(noise_dn)
+        nodes = np.zeros(self.contrasts_dn.size)
         for k, wk in ((j, 1.0 - tr), (j + 1, tr)):
             if wk <= 0.0:
                 continue
@@ -858,11 +861,10 @@ class SampleVolume:
                 continue
             iz = min(int((zf - z[0]) / (z[1] - z[0])), z.size - 2)
             tz = (zf - z[iz]) / (z[iz + 1] - z[iz])
-            blk = p[i_n:i_n + 2, ic:ic + 2, iz:iz + 2].astype(np.float64)
-            val = ((1 - tn) * ((1 - tc) * blk[0, 0] + tc * blk[0, 1]) +
-                   tn * ((1 - tc) * blk[-1, 0] + tc * blk[-1, 1]))
-            out += wk * float((1 - tz) * val[0] + tz * val[-1])
-        return out
+            blk = p[i_n:i_n + 2, :, iz:iz + 2].astype(np.float64)
+            val = (1 - tn) * blk[0] + tn * blk[-1]
+            nodes += wk * ((1 - tz) * val[:, 0] + tz * val[:, -1])
+        return nodes
 
     def pass_probability_over(self, radius_m: float, z_m: float, weights,
                               noise_dn: float | None = None) -> float:
@@ -883,32 +885,7 @@ class SampleVolume:
         noise_dn : float, optional
             The frame's noise (default the profile's) [gray levels].
         """
-        w = np.asarray(weights, dtype=float)
-        la = math.log(max(float(radius_m), 1e-9))
-        lr = self._log_radii
-        j = int(np.clip(np.searchsorted(lr, la, side="right") - 1, 0, lr.size - 2))
-        tr = min(max((la - lr[j]) / (lr[j + 1] - lr[j]), 0.0, ), 1.0)
-        if noise_dn is None or not np.isfinite(noise_dn):
-            i_n, tn = 0, 0.0
-        else:
-            x = float(np.clip(noise_dn, self.noises_dn[0], self.noises_dn[-1]))
-            i_n = int(np.clip(np.searchsorted(self.noises_dn, x, side="right") - 1, 0, self.noises_dn.size - 2))
-            tn = (x - self.noises_dn[i_n]) / (self.noises_dn[i_n + 1] - self.noises_dn[i_n])
-        # p at every contrast of the grid (the nodes the weights sit on), as pass_probability_at
-        nodes = np.zeros(self.contrasts_dn.size)
-        for k, wk in ((j, 1.0 - tr), (j + 1, tr)):
-            if wk <= 0.0:
-                continue
-            z, p = self._p_z[k]
-            zf = float(z_m)
-            if not z[0] <= zf <= z[-1]:
-                continue
-            iz = min(int((zf - z[0]) / (z[1] - z[0])), z.size - 2)
-            tz = (zf - z[iz]) / (z[iz + 1] - z[iz])
-            blk = p[i_n:i_n + 2, :, iz:iz + 2].astype(np.float64)
-            val = (1 - tn) * blk[0] + tn * blk[-1]
-            nodes += wk * ((1 - tz) * val[:, 0] + tz * val[:, -1])
-        return float(w @ nodes)
+        return float(np.asarray(weights, dtype=float) @ self._p_nodes(radius_m, z_m, noise_dn))
 
     def true_radius_m(self, apparent_radius_m) -> np.ndarray:
         """Invert a' = a F(a): the drop radius behind an apparent radius at z0 [m]."""
