@@ -7,11 +7,18 @@ frame measured in this run, on the same synthetic frames: a textured scene,
 static or panning by (0.7, 0.2) px per frame, with rain streaks obeying
 Eq. (18) of Garg & Nayar and sensor noise of 2 gray levels (the gauge
 camera's).  Each stage is timed by the wall clock and by the CPU time of
-this process (on a shared machine the latter is the steadier figure), and
+this process (on a shared machine the latter is the steadier figure; the
+whole Derainer and MOG2 take the best of three runs each), and
 given as a multiple of one MOG2.apply on the same frames in the same run.  Targets at 1280x720 on one core:
 detection + dynamics + removal >= 30 frames/s, and the part the gauge runs on
 every frame (candidates, streaks, photometric test) no slower than one
 MOG2 update.
+
+The whole Derainer is timed as ``raingauge derain`` runs it (``near_px=0``:
+its outputs are the derained frames and the removed pixels) and, beside it,
+with the library default ``near_px=1``, which also runs the relaxed run test
+that only widens ``DerainedFrame.detected`` (the mask the quality benchmark
+scores).
 """
 
 from __future__ import annotations
@@ -86,13 +93,28 @@ def per_frame_ms(fn, items):
     return 1000.0 * ck.wall / n, 1000.0 * ck.cpu / n
 
 
-def full_run_ms(frames, **kw):
-    """(wall, cpu) milliseconds per frame of the whole Derainer on ``frames``."""
-    d = Derainer(None, **kw)
-    with Clock() as ck:
-        out = list(d.process(frames))
-    assert len(out) == len(frames)
-    return 1000.0 * ck.wall / len(frames), 1000.0 * ck.cpu / len(frames)
+def full_run_ms(frames, repeat=3, **kw):
+    """(wall, cpu) milliseconds per frame of the whole Derainer on ``frames``, a fresh
+    Derainer each time, the best of ``repeat`` runs (by CPU time)."""
+    best = None
+    for _ in range(repeat):
+        d = Derainer(None, **kw)
+        with Clock() as ck:
+            out = list(d.process(frames))
+        assert len(out) == len(frames)
+        ms = (1000.0 * ck.wall / len(frames), 1000.0 * ck.cpu / len(frames))
+        best = ms if best is None or ms[1] < best[1] else best
+    return best
+
+
+def mog2_ms(frames, repeat=3):
+    """(wall, cpu) milliseconds per frame of MOG2.apply, a fresh model each time, the best of
+    ``repeat`` runs (as :func:`full_run_ms`)."""
+    best = None
+    for _ in range(repeat):
+        ms = per_frame_ms(MOG2Detector().apply, frames)
+        best = ms if best is None or ms[1] < best[1] else best
+    return best
 
 
 def bench(shape, T):
@@ -129,11 +151,16 @@ def bench(shape, T):
     res["removal (Sec. 5.2)"] = per_frame_ms(
         lambda n: remove_window(ArrayWindow(lum[n - 3:n + 4], lum[n - 3:n + 4]), bs[n], region, c=3.0,
                                 beta_max=bm, noise_sigma=2.0), wins)
-    kw = dict(c=3.0, noise_sigma=2.0, beta_max=bm, motion="translation")
+    # as `raingauge derain` runs it: its outputs are the derained frames and the removed
+    # pixels, so the relaxed run test that only widens DerainedFrame.detected is off
+    kw = dict(c=3.0, noise_sigma=2.0, beta_max=bm, motion="translation", near_px=0)
     res["FULL Derainer (static camera)"] = full_run_ms(frames, **kw)
     res["FULL Derainer (panning camera)"] = full_run_ms(pan, **kw)
-    mog = MOG2Detector()
-    res["baseline: MOG2.apply"] = per_frame_ms(mog.apply, frames)
+    # the library default, with DerainedFrame.detected in full (near_px=1)
+    kw["near_px"] = 1
+    res["  ... with the full detected mask, static"] = full_run_ms(frames, **kw)
+    res["  ... with the full detected mask, panning"] = full_run_ms(pan, **kw)
+    res["baseline: MOG2.apply"] = mog2_ms(frames)
     res["baseline: temporal median (5 frames)"] = per_frame_ms(
         lambda n: median_frame(frames[max(0, n - 2):n + 3]), range(T))
     return res
@@ -164,10 +191,13 @@ def main(argv=None):
         gauge = r["GAUGE PART: detect_streaks"][1]
         st = r["FULL Derainer (static camera)"]
         pn = r["FULL Derainer (panning camera)"]
+        sd = r["  ... with the full detected mask, static"]
+        pd = r["  ... with the full detected mask, panning"]
         print(f"{s[1]}x{s[0]}: gauge part / one MOG2 update = {gauge / mog:.2f} (target <= 1); full Derainer "
               f"static {1000 / st[1]:.1f} frames/s CPU ({1000 / st[0]:.1f} wall), {st[1] / mog:.2f} x MOG2; "
               f"panning {1000 / pn[1]:.1f} frames/s CPU ({1000 / pn[0]:.1f} wall), {pn[1] / mog:.2f} x MOG2 "
-              f"(target >= 30 frames/s at 1280x720); gauge part {1000 / gauge:.1f} frames/s CPU")
+              f"(target >= 30 frames/s at 1280x720); with the full detected mask static {1000 / sd[1]:.1f}, "
+              f"panning {1000 / pd[1]:.1f} frames/s CPU; gauge part {1000 / gauge:.1f} frames/s CPU")
 
 
 if __name__ == "__main__":

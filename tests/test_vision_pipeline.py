@@ -326,3 +326,20 @@ def test_detected_includes_a_drop_seen_in_two_consecutive_frames():
     out = _run(frames, noise_sigma=0.5)
     runs = np.stack([r.detected & ~r.b for r in out])
     assert runs.sum() > 200 and not (runs & ~truth).any()
+
+
+def test_relaxed_run_test_widens_the_detection_only():
+    # `raingauge derain` runs with near_px=0 (its outputs are the frames and the removed
+    # pixels): the relaxed run test next to the streaks must change neither
+    frames, _, _ = make_clip(T=20, n_streaks=14, seed=7)
+    full = _run(frames)                   # library default near_px=1
+    lean = _run(frames, near_px=0)
+    assert len(full) == len(lean) == len(frames)
+    extra = 0
+    for a, b in zip(full, lean):
+        np.testing.assert_array_equal(a.frame, b.frame)
+        np.testing.assert_array_equal(a.rain, b.rain)
+        np.testing.assert_array_equal(a.b, b.b)
+        assert not (b.detected & ~a.detected).any()       # near_px=1 only adds pixels
+        extra += int((a.detected & ~b.detected).sum())
+    assert extra > 0                      # ... and on this clip it does add some

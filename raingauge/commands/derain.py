@@ -124,7 +124,9 @@ def run(args: argparse.Namespace) -> int:
     shape = head[0].shape
     fps = reader.fps or (profile.frame_rate_hz if profile is not None else 30.0)
 
-    derainer = Derainer(profile, c=args.c, l=args.l, f=args.f, motion=args.motion)
+    # the mask written is of the removed pixels (DerainedFrame.rain): the relaxed run test,
+    # which only widens DerainedFrame.detected, is not run (near_px=0)
+    derainer = Derainer(profile, c=args.c, l=args.l, f=args.f, motion=args.motion, near_px=0)
     progress = _Progress(total, enabled=not args.quiet)
     writers = [FrameWriter(args.output, fps=fps)]
     mask_w = FrameWriter(args.mask, fps=fps) if args.mask else None

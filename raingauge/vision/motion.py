@@ -231,7 +231,8 @@ def _cubic_weights(t: float, a: float = -0.5) -> np.ndarray:
 
 def _translate_cubic(src: np.ndarray, dx: float, dy: float, *, a: float = -0.75,
                      work: np.ndarray | None = None, out: np.ndarray | None = None) -> np.ndarray:
-    """``out(x, y) = src(x + dx, y + dy)``, bicubic, replicated border: the translation case of warp_to.
+    """``out(x, y) = src(x + dx, y + dy)``, bicubic, replicated border: the translation case of warp_to
+    (float32 out of a float32 or uint8 ``src``).
 
     A separable 4-tap filter for the fraction and a whole-pixel shift (a
     slice, the uncovered side replicated): the cubic convolution of
@@ -247,7 +248,7 @@ def _translate_cubic(src: np.ndarray, dx: float, dy: float, *, a: float = -0.75,
     h, w = src.shape[:2]
     ix, iy = math.floor(dx), math.floor(dy)
     if abs(ix) >= w - 1 or abs(iy) >= h - 1:
-        return cv2.warpAffine(src, np.array([[1, 0, dx], [0, 1, dy]]), (w, h),
+        return cv2.warpAffine(src.astype(np.float32, copy=False), np.array([[1, 0, dx], [0, 1, dy]]), (w, h),
                               flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
     kx = _cubic_weights(dx - ix, a)
     ky = _cubic_weights(dy - iy, a)
@@ -317,7 +318,9 @@ def warp_to(frame: np.ndarray, M: np.ndarray, *, min_shift_px: float | None = No
     src = frame if frame.dtype in (np.uint8, np.float32) else frame.astype(np.float32)
     affine = is_affine(M)
     translation = affine and is_translation(M)
-    if translation and src.dtype == np.float32:
+    if translation:
+        # (an 8-bit frame is filtered straight into float32: the same values as filtering
+        # its float32 copy, with a quarter of the memory read)
         if work is not None and (work.shape != src.shape or work.dtype != np.float32):
             work = None
         if out is not None and (out.shape != src.shape or out.dtype != np.float32):

@@ -460,11 +460,13 @@ def _big_streaks(idx, li, n, min_pixels):
     big = area_all >= max(int(min_pixels), 1)
     big[0] = False
     keep_ids = np.flatnonzero(big)
-    sel = big[li]
-    idx, li = idx[sel], li[sel]
+    # (np.take and the positions of the kept pixels: several times quicker than
+    # boolean-mask indexing on the many small components of a noisy frame)
+    sel = np.flatnonzero(np.take(big, li))
+    idx, li = np.take(idx, sel), np.take(li, sel)
     compact = np.zeros(n + 1, dtype=np.int64)
     compact[keep_ids] = np.arange(keep_ids.size)
-    return idx, compact[li], keep_ids
+    return idx, np.take(compact, li), keep_ids
 
 
 def _streak_tests(idx, lj, m, x, c, z, shape, *, beta_max, noise_sigma, max_relative_residual, residual_sigmas,
@@ -673,13 +675,13 @@ def _accepted_mask(prev, cur, nxt, mask, *, beta_max, noise_sigma=1.0, min_pixel
     # do not depend on how the streaks are numbered
     n, lab = cv2.connectedComponentsWithAlgorithm(m8, 8, cv2.CV_32S, cv2.CCL_WU, labels_out)
     idx = np.flatnonzero(mask.ravel())
-    idx, lj, keep_ids = _big_streaks(idx, lab.ravel()[idx], n - 1, min_pixels)
+    idx, lj, keep_ids = _big_streaks(idx, np.take(lab.ravel(), idx), n - 1, min_pixels)
     out = np.zeros(mask.shape, bool)
     if keep_ids.size == 0:
         return (out, 0, idx[:0]) if with_index else (out, 0)
-    x = prev.ravel()[idx].astype(np.float64)
-    z = nxt.ravel()[idx].astype(np.float64)
-    t = _streak_tests(idx, lj, keep_ids.size, x, cur.ravel()[idx], z, mask.shape, beta_max=beta_max,
+    x = np.take(prev.ravel(), idx).astype(np.float64)
+    z = np.take(nxt.ravel(), idx).astype(np.float64)
+    t = _streak_tests(idx, lj, keep_ids.size, x, np.take(cur.ravel(), idx), z, mask.shape, beta_max=beta_max,
                       noise_sigma=noise_sigma, max_relative_residual=max_relative_residual,
                       residual_sigmas=residual_sigmas, slope_sigmas=slope_sigmas, cluster_px=cluster_px, ymax=False)
     acc = t["accepted"]

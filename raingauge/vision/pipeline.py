@@ -322,8 +322,13 @@ class Derainer:
         arr = getattr(u, what)
         if j == n:
             return arr, None
+        M = self._tracker.between(j, n)
+        if not self._moved(j, n, M):
+            return arr, None
         out = self._take(arr.shape, np.float32)
-        res = warp_to(arr, self._tracker.between(j, n), work=self._scratch("warp", arr.shape, np.float32), out=out,
+        if what == "lum" and self.profile is None and u.raw.dtype == np.uint8 and u.raw.ndim == 2:
+            arr = u.raw     # the luminance of a gray 8-bit frame is its values: warped from 8 bits
+        res = warp_to(arr, M, min_shift_px=0.0, work=self._scratch("warp", arr.shape, np.float32), out=out,
                       valid_out=self._scratch(valid_name, arr.shape[:2], np.bool_))
         if res[0] is not out:
             self._give([out])
