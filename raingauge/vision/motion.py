@@ -73,10 +73,13 @@ def _refine_translation(ref: np.ndarray, mov: np.ndarray, dx: float, dy: float, 
                         tol_px: float = 2e-3) -> tuple[float, float]:
     """Gauss-Newton refinement of a translation [Lucas1981]: ``mov(x + d) ~ ref(x)`` in least squares.
 
-    Forward-additive form: each iteration warps ``mov`` by the current shift
-    (bicubic, Keys' a = -0.5, exact on ramps) and linearises it with its own
-    gradient; intensities are taken about their means, so a change of
-    exposure does not bias the shift.
+    Inverse-compositional form [Baker2004]: the gradient and the 2 x 2 normal
+    matrix are those of ``ref``, computed once; each iteration warps ``mov``
+    by the current shift (bicubic, Keys' a = -0.5, exact on ramps) and solves
+    for the step.  For a translation it converges to the least-squares shift
+    as the forward-additive form does, without a gradient per iteration.
+    Intensities are taken about their means, so a change of exposure does not
+    bias the shift.
     """
     import cv2
 
@@ -87,20 +90,19 @@ def _refine_translation(ref: np.ndarray, mov: np.ndarray, dx: float, dy: float, 
     inner = (slice(m, h - m), slice(m, w - m))
     r = ref[inner]
     r = r - np.float32(r.mean())
+    # the gradient on the inner part (and the one pixel around it that its 3 x 3 kernel reads),
+    # contiguous for the dot products
+    grown = ref[m - 1:h - m + 1, m - 1:w - m + 1]
+    gx = np.ascontiguousarray(cv2.Sobel(grown, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)[1:-1, 1:-1])
+    gy = np.ascontiguousarray(cv2.Sobel(grown, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)[1:-1, 1:-1])
+    H = np.array([[np.vdot(gx, gx), np.vdot(gx, gy)], [np.vdot(gx, gy), np.vdot(gy, gy)]], np.float64)
+    if not np.linalg.det(H) > 1e-9 * max(H[0, 0] * H[1, 1], 1e-30):
+        return dx, dy
+    H_inv = np.linalg.inv(H)
     for _ in range(iterations):
-        full = _translate_cubic(mov, dx, dy, a=-0.5)
-        warped = full[inner]
+        warped = _translate_cubic(mov, dx, dy, a=-0.5)[inner]
         e = warped - np.float32(warped.mean()) - r
-        # the gradient on the inner part (and the one pixel around it that its 3 x 3 kernel reads),
-        # contiguous once for the four dot products
-        grown = full[m - 1:h - m + 1, m - 1:w - m + 1]
-        gx = np.ascontiguousarray(cv2.Sobel(grown, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)[1:-1, 1:-1])
-        gy = np.ascontiguousarray(cv2.Sobel(grown, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)[1:-1, 1:-1])
-        H = np.array([[np.vdot(gx, gx), np.vdot(gx, gy)], [np.vdot(gx, gy), np.vdot(gy, gy)]], np.float64)
-        if not np.linalg.det(H) > 1e-9 * max(H[0, 0] * H[1, 1], 1e-30):
-            break
-        b = np.array([np.vdot(gx, e), np.vdot(gy, e)], np.float64)
-        step = -np.linalg.solve(H, b)
+        step = -(H_inv @ np.array([np.vdot(gx, e), np.vdot(gy, e)], np.float64))
         dx, dy = dx + float(step[0]), dy + float(step[1])
         if max(abs(step[0]), abs(step[1])) < tol_px:
             break
