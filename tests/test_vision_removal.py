@@ -207,3 +207,35 @@ def test_window_run_candidates_match_the_run_prefilter_of_every_rise_and_fall():
     expect = run_prefilter(rises, falls)
     np.testing.assert_array_equal(win.run_candidates(3.0), expect)
     assert expect[12:28, 21].all()
+
+
+@pytest.mark.parametrize("background", ["uniform:40", "uniform:200"])
+def test_motion_tracker_sees_no_motion_in_rain_over_a_featureless_scene(background):
+    # over a featureless background the phase-correlation peak is one of the noise or of the
+    # rain's own fall (shifts of tens of pixels): a static camera must not be moved by whole
+    # pixels (a stray fraction of a pixel misaligns nothing on such a scene)
+    from raingauge.profile import default_profile
+    from raingauge.render.simulator import render_clip
+
+    prof = default_profile().replace(width_px=480, height_px=270)
+    frames, _ = render_clip(prof, n_frames=16, rain_rate_mm_h=30.0, seed=3, background=background)
+    tr = MotionTracker()
+    for f in frames:
+        tr.add(f.astype(np.float32))
+    worst = max(np.abs(tr.between(k - 1, k)[:2, 2]).max() for k in range(1, len(frames)))
+    assert worst < 1.0
+
+
+def test_motion_tracker_follows_a_pan_of_several_pixels_in_rain():
+    # the check against false peaks keeps a true shift of a textured scene, rain or not
+    big = texture((420, 600), seed=6, blur=2.0)
+    rng = np.random.default_rng(1)
+    tr = MotionTracker()
+    for k in range(6):
+        f = big[40 + 3 * k:240 + 3 * k, 40 + 5 * k:360 + 5 * k].copy()     # 5 px right, 3 px down per frame
+        ys, xs = rng.integers(0, 190, 60), rng.integers(0, 320, 60)
+        for j in range(12):                                                 # streaks 12 px long
+            f[np.minimum(ys + j, 199), xs] += 60.0
+        tr.add(f)
+    M = tr.between(0, 5)
+    assert M[0, 2] == pytest.approx(25.0, abs=0.3) and M[1, 2] == pytest.approx(15.0, abs=0.3)

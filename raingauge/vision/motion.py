@@ -14,7 +14,9 @@ Motion models form a registry, :data:`MOTION_MODELS`:
 
 ``none``         the camera is static.
 ``translation``  phase correlation [Kuglin1975] on a central crop, refined by Gauss-Newton
-                 [Lucas1981]: pans, tilts, jitter.
+                 [Lucas1981]: pans, tilts, jitter.  A shift of a pixel or more is kept only
+                 when it aligns the scene clearly better than none: over a featureless
+                 scene the peak is one of the noise or of the rain's own fall.
 ``euclidean``    ECC maximisation [Evangelidis2008] (rotation + translation), seeded by
                  phase correlation and kept only when it aligns better: a mast
                  that shakes and twists.
@@ -129,7 +131,48 @@ def _phase_translation(ref_small: np.ndarray, mov_small: np.ndarray, window: np.
         rx, ry = _refine_translation(ref_small, mov_small, dx, dy)
         if math.isfinite(rx) and math.isfinite(ry) and abs(rx - dx) < 2 and abs(ry - dy) < 2:
             dx, dy = rx, ry
+    if max(abs(dx), abs(dy)) >= CHECKED_SHIFT_PX and not _aligns_better(ref_small, mov_small, dx, dy):
+        # a peak of the rain itself or of noise, not of the scene
+        return 0.0, 0.0, float(response)
     return float(dx), float(dy), float(response)
+
+
+#: Shifts of at least this size must align the scene better than none (:func:`_aligns_better`) [px].
+CHECKED_SHIFT_PX = 1.0
+
+#: ... their median absolute difference at most this fraction of the unshifted one [-].
+ALIGNMENT_GAIN = 0.8
+
+
+def _aligns_better(ref: np.ndarray, mov: np.ndarray, dx: float, dy: float) -> bool:
+    """Whether ``mov`` shifted by (dx, dy) matches ``ref`` clearly better than unshifted.
+
+    The phase-correlation peak of a featureless or smooth scene (a dark
+    background, an overcast sky) is one of its noise, and in dense rain over
+    such a scene it can be the rain's own fall between the frames: shifts of
+    pixels to tens of pixels that align nothing of the background.  The median
+    absolute difference (intensities about their means) is that of the
+    background, which most pixels show even in heavy rain: a true shift lowers
+    it well below that of no shift; a false one leaves it where it was (or
+    raises it).  "No shift" is the fraction of the shift alone, whose
+    interpolation smooths the noise as much (by up to a fifth of its median).
+    """
+    h, w = ref.shape
+    # where mov(x + d) lies inside mov (2 px clear of its edges, which the shift replicates)
+    x0, x1 = max(0, -math.floor(dx)) + 2, min(w, w - math.ceil(dx)) - 2
+    y0, y1 = max(0, -math.floor(dy)) + 2, min(h, h - math.ceil(dy)) - 2
+    if x1 - x0 < 16 or y1 - y0 < 16:
+        return False
+    inner = (slice(y0, y1, 2), slice(x0, x1, 2))     # every other pixel is plenty for a median
+    r = ref[inner] - np.float32(ref[inner].mean())
+
+    def mad(sx, sy):
+        moved = _translate_cubic(mov, sx, sy, a=-0.5)[inner]
+        return float(np.median(np.abs(moved - np.float32(moved.mean()) - r)))
+
+    # against the fraction of the shift alone (under half a pixel: no motion to speak of),
+    # which smooths the noise as the whole shift does
+    return mad(dx, dy) < ALIGNMENT_GAIN * mad(dx - round(dx), dy - round(dy))
 
 
 def estimate_motion(ref: np.ndarray, moving: np.ndarray, *, model: str = "translation",
