@@ -170,6 +170,25 @@ def test_change_noise_is_the_sensor_noise_without_the_streaks():
     assert est == pytest.approx(2.0 * math.sqrt(1.5), rel=0.05)
 
 
+@pytest.mark.parametrize("sigma", [0.8, 3.0])
+def test_change_noise_of_8_bit_frames_equals_that_of_their_float_copies(sigma):
+    """8-bit frames take the histogram path (no sort); it gives the noise of the same
+    frames as float32 (to float rounding), streaks, clipping and all."""
+    from raingauge.gauge.rejection import change_noise_dn
+
+    rng = np.random.default_rng(11)
+    shape = (270, 480)
+    base = rng.uniform(20.0, 220.0, shape)
+    frames = []
+    for _ in range(3):
+        f = base + rng.normal(0.0, sigma, shape) + 45.0 * (rng.random(shape) < 0.02)
+        frames.append(np.clip(np.rint(f), 0, 255).astype(np.uint8))
+    as_u8 = change_noise_dn(*frames)
+    as_f32 = change_noise_dn(*(f.astype(np.float32) for f in frames))
+    assert as_u8 == pytest.approx(as_f32, rel=1e-5)
+    assert as_u8 == pytest.approx(sigma * math.sqrt(1.5), rel=0.25)
+
+
 def test_tolerance_is_capped_for_poorly_measured_streaks():
     """A streak measured too poorly to place within a factor of two of the law says nothing
     about it: the tolerance stops at the cap (faint moving texture would pass any wider

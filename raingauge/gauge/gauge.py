@@ -656,11 +656,13 @@ class RainGauge:
             neighbour_change = cv2.absdiff(raws[2], raws[0])[::2, ::2]
         else:
             neighbour_change = nxt[::2, ::2] - prev[::2, ::2]
-        flags = self._frame_flags(raw, cur, neighbour_change, gap)
         # the noise streaks are measured in: the sensor's and the flicker of rain too faint to
-        # detect (Eq. 27); it sets each streak's errors and the frame's sample volume
-        self._frame_noise_change = max(change_noise_dn(prev, cur, nxt), self.noise_change)
+        # detect (Eq. 27); it sets each streak's errors and the frame's sample volume (first:
+        # the flags' drop brightness E_r then is the one the streaks are measured with)
+        noise = change_noise_dn(*raws) if u8 else change_noise_dn(prev, cur, nxt)   # (8 bits: the same)
+        self._frame_noise_change = max(noise, self.noise_change)
         self._noise_log.append(self._frame_noise_change / math.sqrt(1.5))
+        flags = self._frame_flags(raw, cur, neighbour_change, gap)
         slope = float(np.median(self._slopes)) if len(self._slopes) >= 5 else 0.0
         # hysteresis only where the drops' contrast is low (their streaks pass c in patches)
         # and the scene is still (moving texture would grow into streaks)

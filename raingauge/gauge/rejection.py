@@ -335,6 +335,8 @@ def change_noise_dn(prev, cur, nxt, *, step: int = 4, along_px: int = 1, iterati
     k = max(int(along_px), 1)
     # per-pixel noise: every 3rd row too (~77k samples at 1280x720: the standard deviation to 0.3 %)
     sl = (slice(None, None, 1 if k > 1 else 3), slice(None, None, step))
+    if k == 1 and all(np.asarray(a).dtype == np.uint8 for a in (prev, cur, nxt)):
+        return _change_noise_u8(prev[sl], cur[sl], nxt[sl], iterations)
     ch = np.asarray(cur, dtype=np.float32)[sl] - 0.5 * (np.asarray(prev, dtype=np.float32)[sl]
                                                         + np.asarray(nxt, dtype=np.float32)[sl])
     if k > 1 and ch.shape[0] > k:
@@ -350,6 +352,33 @@ def change_noise_dn(prev, cur, nxt, *, step: int = 4, along_px: int = 1, iterati
         dev = x - np.float32(centre)
         sd = math.sqrt(float(np.dot(dev, dev)) / x.size) * 1.0135
     return sd * math.sqrt(k)
+
+
+def _change_noise_u8(prev, cur, nxt, iterations: int) -> float:
+    """:func:`change_noise_dn` (``along_px=1``) of 8-bit frames from the histogram of
+    2 I_n - I_{n-1} - I_{n+1}: the change takes the 1021 half-integer values -255 ... 255,
+    so its median and its clipped moments are sums over the histogram (no sort)."""
+    c2 = cur.astype(np.int16) * 2
+    c2 -= prev
+    c2 -= nxt
+    n = c2.size
+    if n == 0:
+        return float("nan")
+    h = np.bincount((c2 + 510).ravel(), minlength=1021).astype(np.float64)
+    vals = 0.5 * (np.arange(1021, dtype=np.float64) - 510.0)
+    cum = np.cumsum(h)
+    lo, hi = np.searchsorted(cum, [(n - 1) // 2 + 1, n // 2 + 1])
+    centre = 0.5 * (vals[lo] + vals[hi])
+    mean = float(h @ vals) / n
+    sd = math.sqrt(float(h @ (vals - mean) ** 2) / n)
+    for _ in range(iterations):
+        w = np.where(np.abs(vals - centre) <= 3.0 * sd, h, 0.0)
+        m = float(w.sum())
+        if not m:
+            break
+        centre = float(w @ vals) / m
+        sd = math.sqrt(float(w @ (vals - centre) ** 2) / m) * 1.0135
+    return sd
 
 
 def streak_change_dn(radius_px, width_px, motion_px, contrast_dn) -> np.ndarray:
