@@ -1620,56 +1620,46 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     two-signed changes of moving scenery), ``ok`` and the streaks' own pixels ``own_k, own_y, own_x``
     (index into the K streaks, row, column).
     """
-    kw = dict(valid=valid, margin_px=margin_px, sigma_min=sigma_min, cur=cur, prev=prev, contrast=contrast,
-              noise_sigma=noise_sigma)
+    L = np.asarray(select, dtype=np.int64)
+    if valid is None:
+        valid = stats[:, 4] > 0
+    own = _own_streak_pixels(change, labels, stats, L, margin_px=margin_px, cur=cur, prev=prev, contrast=contrast)
+    kw = dict(margin_px=margin_px, sigma_min=sigma_min, cur=cur, contrast=contrast, noise_sigma=noise_sigma)
     if not baseline:
-        return _measure_streak_table_once(change, labels, stats, select, **kw)
+        return _profile_pass(change, labels, valid, own, **kw)
     # against the flanks just beyond the detected pixels
-    first = _measure_streak_table_once(change, labels, stats, select, baseline_width=np.zeros(np.size(select)),
-                                       **kw)
+    first = _profile_pass(change, labels, valid, own, baseline_width=np.zeros(L.size), **kw)
     # a faint, wide (defocused) streak is detected only along its core, and its flanks there
-    # lie on it: measured again against the flanks beyond the width found
+    # lie on it: measured again against the flanks beyond the width found (its own pixels,
+    # axis and Eq. 18 fit are those of the first pass)
     wide = np.flatnonzero(np.nan_to_num(first["width_apparent"]) > first["row_width"] + WIDE_MARGIN_PX)
     if wide.size:
-        again = _measure_streak_table_once(change, labels, stats, first["label"][wide],
-                                           baseline_width=first["width_apparent"][wide], **kw)
+        again = _profile_pass(change, labels, valid, _subset_streaks(own, wide),
+                              baseline_width=first["width_apparent"][wide], **kw)
         for key in PER_STREAK_KEYS:
             first[key][wide] = again[key]
     return first
 
 
-def _measure_streak_table_once(change, labels, stats, select, *, valid=None, margin_px: int = 4,
-                               sigma_min: float = SHARP_SIGMA_PX, cur=None, prev=None, contrast=None,
-                               noise_sigma: float = 2.0, baseline_width=None) -> dict:
-    """One pass of :func:`measure_streak_table`; with ``baseline_width`` (K,) [px] the band
-    reaches beyond half of max(detected row width, baseline_width) and its flanks there set
-    each streak's baseline."""
-    L = np.asarray(select, dtype=np.int64)
+#: Per-streak entries of :func:`_own_streak_pixels` (the others list its own pixels).
+_OWN_PER_STREAK = ("L", "x", "y", "w", "h", "y0", "y1", "ch", "xm", "ym", "slope", "row_width",
+                   "background_dn", "beta")
+
+
+def _own_streak_pixels(change, labels, stats, L, *, margin_px, cur, prev, contrast) -> dict:
+    """What a streak's own (detected) pixels give, once for both passes of
+    :func:`measure_streak_table`: its box and rows, its axis from the moments of their
+    positive change, the detected width along a row, and the background and photometric
+    slope of Eq. (18) on them."""
     K = L.size
     M, N = labels.shape
-    empty = np.zeros(0)
-    if K == 0:
-        out = {k: empty for k in ("xm", "ym", "slope", "width_apparent", "top", "bottom", "motion",
-                                  "plateau", "background_dn", "beta", "chi2", "row_width")}
-        out.update(ok=np.zeros(0, bool), label=L, own_k=L, own_y=L, own_x=L)
-        return out
-    if valid is None:
-        valid = stats[:, 4] > 0
     x, y, w, h = (stats[L, k].astype(np.int64) for k in range(4))
     m = int(margin_px)
-    # the band used below reaches 0.5 w_row + 1.5 + m/2 px from the axis, which lies inside
-    # the detected pixels: m + 2 px beyond the box hold it
-    mh = m + 2
-    if baseline_width is not None:
-        bw = np.nan_to_num(np.asarray(baseline_width, dtype=np.float64), nan=0.0, posinf=0.0)
-        bw = np.clip(bw, 0.0, 4.0 * np.maximum(w, 1) + 8.0)
-        mh = mh + np.ceil(0.5 * bw).astype(np.int64)
-    x0 = np.maximum(x - mh, 0)
-    x1 = np.minimum(x + w + mh, N)
+    # (the moments are taken in the crop of the pass without a wider baseline)
+    x0 = np.maximum(x - (m + 2), 0)
     y0 = np.maximum(y - m, 0)
     y1 = np.minimum(y + h + m, M)
     ch = y1 - y0
-    # -- the streak's own pixels lie in its box: axis from the moments of their positive change
     box = _crop_pixels(x, x + w, y, y + h)
     kq, gyq, gxq = box[4], box[7], box[8]
     flat_q = gyq * N + gxq
@@ -1686,6 +1676,69 @@ def _measure_streak_table_once(change, labels, stats, select, *, valid=None, mar
     own_rows = np.bincount(rstart[ko] + (oy - y0[ko]), minlength=R) > 0
     n_rows = _group_sum(row_k, own_rows, K)
     row_width = np.bincount(ko, minlength=K) / np.maximum(n_rows, 1)
+    # -- background and the photometric slope of Eq. (18) on the own pixels
+    bg_dn = np.full(K, np.nan)
+    beta = np.full(K, np.nan)
+    if cur is not None:
+        n_own = np.bincount(ko, minlength=K)
+        g_o = _Groups(ko, K)
+        with np.errstate(all="ignore"):
+            bg_dn = g_o.sum(cur_o - raw_o) / n_own
+        if prev is not None:
+            b = np.take(prev, flat_o).astype(np.float64)
+            d = cur_o - b
+            sb = g_o.sum(b)
+            sbb = g_o.sum(b * b)
+            sd = g_o.sum(d)
+            sbd = g_o.sum(b * d)
+            with np.errstate(all="ignore"):
+                n = np.maximum(n_own, 1)
+                vb = sbb / n - (sb / n) ** 2
+                cov = sbd / n - sb * sd / n ** 2
+                fit = (n_own >= 6) & (vb >= 16.0)
+                beta = np.where(fit, -cov / np.where(fit, vb, 1.0), np.nan)
+    return {"L": L, "x": x, "y": y, "w": w, "h": h, "y0": y0, "y1": y1, "ch": ch, "xm": xm, "ym": ym,
+            "slope": slope, "row_width": row_width, "background_dn": bg_dn, "beta": beta,
+            "own_k": ko, "own_y": oy, "own_x": ox}
+
+
+def _subset_streaks(own: dict, keep: np.ndarray) -> dict:
+    """The per-streak entries of :func:`_own_streak_pixels` for the streaks ``keep`` (the
+    list of own pixels is not needed by a second pass and is left out)."""
+    return {k: own[k][keep] for k in _OWN_PER_STREAK}
+
+
+def _profile_pass(change, labels, valid, own, *, margin_px: int = 4, sigma_min: float = SHARP_SIGMA_PX,
+                  cur=None, contrast=None, noise_sigma: float = 2.0, baseline_width=None) -> dict:
+    """One pass of :func:`measure_streak_table` over the streaks of ``own``
+    (:func:`_own_streak_pixels`); with ``baseline_width`` (K,) [px] the band reaches beyond
+    half of max(detected row width, baseline_width) and its flanks there set each streak's
+    baseline."""
+    L = own["L"]
+    K = L.size
+    M, N = labels.shape
+    empty = np.zeros(0)
+    if K == 0:
+        out = {k: empty for k in ("xm", "ym", "slope", "width_apparent", "top", "bottom", "motion",
+                                  "plateau", "background_dn", "beta", "chi2", "row_width")}
+        out.update(ok=np.zeros(0, bool), label=L, own_k=L, own_y=L, own_x=L)
+        return out
+    x, y, w, h = own["x"], own["y"], own["w"], own["h"]
+    y0, y1, ch = own["y0"], own["y1"], own["ch"]
+    xm, ym, slope, row_width = own["xm"], own["ym"], own["slope"], own["row_width"]
+    m = int(margin_px)
+    # the band used below reaches 0.5 w_row + 1.5 + m/2 px from the axis, which lies inside
+    # the detected pixels: m + 2 px beyond the box hold it
+    mh = m + 2
+    if baseline_width is not None:
+        bw = np.nan_to_num(np.asarray(baseline_width, dtype=np.float64), nan=0.0, posinf=0.0)
+        bw = np.clip(bw, 0.0, 4.0 * np.maximum(w, 1) + 8.0)
+        mh = mh + np.ceil(0.5 * bw).astype(np.int64)
+    x0 = np.maximum(x - mh, 0)
+    x1 = np.minimum(x + w + mh, N)
+    rstart = np.concatenate(([0], np.cumsum(ch)[:-1]))
+    R = int(ch.sum())
+    row_k = np.repeat(np.arange(K), ch)
     # -- the band around the axis (|offset| <= half, inside the crop [x0, x1) and not on
     # another streak), built row by row from the axis, row sums
     band_width = row_width if baseline_width is None else np.maximum(row_width, bw)
@@ -1764,29 +1817,9 @@ def _measure_streak_table_once(change, labels, stats, select, *, valid=None, mar
     top = top_r + cap
     bot = bot_r - cap
     motion = bot - top
-    # -- background and the photometric slope of Eq. (18) on the own pixels
-    bg_dn = np.full(K, np.nan)
-    beta = np.full(K, np.nan)
-    ok_k = ko
-    if cur is not None:
-        c_own = cur_o
-        n_own = np.bincount(ok_k, minlength=K)
-        g_o = _Groups(ok_k, K)
-        with np.errstate(all="ignore"):
-            bg_dn = g_o.sum(c_own - raw_o) / n_own
-        if prev is not None:
-            b = np.take(prev, flat_o).astype(np.float64)
-            d = c_own - b
-            sb = g_o.sum(b)
-            sbb = g_o.sum(b * b)
-            sd = g_o.sum(d)
-            sbd = g_o.sum(b * d)
-            with np.errstate(all="ignore"):
-                n = np.maximum(n_own, 1)
-                vb = sbb / n - (sb / n) ** 2
-                cov = sbd / n - sb * sd / n ** 2
-                fit = (n_own >= 6) & (vb >= 16.0)
-                beta = np.where(fit, -cov / np.where(fit, vb, 1.0), np.nan)
+    empty_i = np.zeros(0, np.int64)
     return {"label": L, "xm": xm, "ym": ym, "slope": slope, "width_apparent": w_app, "top": top,
-            "bottom": bot, "motion": motion, "plateau": plateau, "background_dn": bg_dn, "beta": beta,
-            "chi2": chi2, "ok": ok, "row_width": row_width, "own_k": ok_k, "own_y": oy, "own_x": ox}
+            "bottom": bot, "motion": motion, "plateau": plateau, "background_dn": own["background_dn"],
+            "beta": own["beta"], "chi2": chi2, "ok": ok, "row_width": row_width,
+            "own_k": own.get("own_k", empty_i), "own_y": own.get("own_y", empty_i),
+            "own_x": own.get("own_x", empty_i)}
