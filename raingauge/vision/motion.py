@@ -252,6 +252,8 @@ def is_translation(M: np.ndarray) -> bool:
 
 def transform_magnitude_px(M: np.ndarray, shape: tuple[int, int]) -> float:
     """Largest displacement [px] that ``M`` applies to the corners of a (rows, cols) frame."""
+    if is_translation(M):       # the same shift everywhere
+        return float(math.hypot(float(M[0, 2]), float(M[1, 2])))
     h, w = shape
     corners = np.array([[0, 0, 1], [w - 1, 0, 1], [0, h - 1, 1], [w - 1, h - 1, 1]], dtype=np.float64).T
     moved = M @ corners
@@ -464,5 +466,12 @@ class MotionTracker:
         """Transform warping frame j into frame n."""
         M = self._between.get((j, n))
         if M is None:
-            M = self._between[(j, n)] = np.linalg.solve(self._G[j], self._G[n])
+            Gj, Gn = self._G[j], self._G[n]
+            if is_translation(Gj) and is_translation(Gn):
+                # G_j^-1 G_n of two translations: the difference of their shifts
+                M = np.eye(3)
+                M[:2, 2] = Gn[:2, 2] - Gj[:2, 2]
+            else:
+                M = np.linalg.solve(Gj, Gn)
+            self._between[(j, n)] = M
         return M.copy()
