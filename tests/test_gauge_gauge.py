@@ -529,3 +529,73 @@ def test_gauge_estimates_the_drop_brightness(heavy):
     assert np.isnan(RainGauge(CAM).drop_brightness_estimate_dn)
     with pytest.raises(ValueError, match="drop_brightness_dn"):
         RainGauge(CAM, drop_brightness_dn=-5.0)
+
+
+def test_merge_probability_of_streaks_slanted_by_the_wind():
+    """In a cross wind the streaks are parallelograms, each slanted by u / v(a) (small drops
+    more): a probe streak is touched by the others as their row widths and slants say,
+    (r_S + r_G + 2)(h_S + h_G + 2) + |s_S - s_G| h_S h_G, not as their boxes (mostly
+    empty, they would count the merges several times over) nor as one common slant."""
+    from raingauge.gauge.gauge import merge_probability
+
+    rng = np.random.default_rng(2)
+    M, N = 270, 480
+    row_w = rng.integers(2, 7, 60)
+    heights = rng.integers(10, 70, 60)
+    slants = rng.uniform(0.3, 1.2, 60)
+
+    def paint(mask, x, y, rw, h, s):
+        for i in range(h):
+            x0 = x + int(round(s * i))
+            mask[y + i, x0:x0 + rw] = True
+
+    box_w = np.array([rw + int(round(s * (h - 1))) for rw, h, s in zip(row_w, heights, slants)])
+    hits = 0
+    trials = 4000
+    prw, ph, ps = 4, 50, 0.45
+    pbw = prw + int(round(ps * (ph - 1)))
+    for _ in range(trials // 40):
+        mask = np.zeros((M + 300, N + 300), bool)          # boxes may hang over the frame
+        for rw, h, s in zip(row_w, heights, slants):
+            paint(mask, rng.integers(0, N + 100), rng.integers(0, M + 100), rw, h, s)
+        big = np.pad(mask, 1)
+        grown = big[1:-1, 1:-1] | big[:-2, 1:-1] | big[2:, 1:-1] | big[1:-1, :-2] | big[1:-1, 2:]
+        grown |= big[:-2, :-2] | big[2:, 2:] | big[:-2, 2:] | big[2:, :-2]
+        for _ in range(40):
+            y, x = rng.integers(100, M + 100 - ph), rng.integers(100, N + 100 - pbw)
+            probe = np.zeros_like(mask)
+            paint(probe, x, y, prw, ph, ps)
+            hits += bool((grown & probe).any())
+    shape = (M + 100, N + 100)
+    p = merge_probability([pbw], [ph], box_w, heights, shape, slope=0.6, area_px=[prw * ph],
+                          other_area_px=row_w * heights)[0]
+    assert hits / trials == pytest.approx(p, abs=0.03)
+    assert merge_probability([pbw], [ph], box_w, heights, shape)[0] > p + 0.3          # boxes
+    assert merge_probability([pbw], [ph], box_w, heights, shape, slope=0.6)[0] < p - 0.04   # one slant
+    # straight down (|slope| < 0.05) it is the box formula itself
+    assert merge_probability([4], [50], box_w, heights, (M, N), slope=0.03, area_px=[200],
+                             other_area_px=row_w * heights)[0] == \
+        merge_probability([4], [50], box_w, heights, (M, N))[0]
+    # a streak among the others does not touch itself
+    alone = merge_probability([pbw], [ph], [pbw], [ph], (M, N), self_included=[True], slope=0.6,
+                              area_px=[prw * ph], other_area_px=[prw * ph])[0]
+    assert alone == pytest.approx(0.0, abs=1e-12)
+
+
+def test_rain_direction_is_followed_before_the_drop_brightness_is_known():
+    """In a cross wind the detection smooths along the slanted streaks from the first
+    dozen frames on, before any drop was decided (they wait for the drop brightness E_r):
+    the direction of the long streaks that passed the velocity law, u / v(a) for the drops
+    that carry the rain (3 m/s across 5-9 m/s); straight down (0) without wind."""
+    sim = pytest.importorskip("raingauge.render.simulator")
+    cam = default_profile().replace(width_px=480, height_px=270)
+    for wind, lo, hi in ((3.0, 0.3, 0.75), (0.0, 0.0, 0.0)):
+        frames, _ = sim.render_clip(cam, n_frames=45, rain_rate_mm_h=30.0, seed=5, wind_m_s=wind)
+        g = RainGauge(cam, velocity_model="gunn_kinzer")
+        seen = []
+        for k, fr in enumerate(frames):
+            g.process(fr)
+            if k >= 12 and len(g._slopes) < 5:
+                seen.append(g._rain_slope())
+        assert len(seen) > 20, "drops were decided before the rain's direction could be followed"
+        assert all(lo <= s <= hi for s in seen), seen

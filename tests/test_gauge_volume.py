@@ -349,3 +349,51 @@ def test_brightness_reference_from_the_model(volume):
     mid = 0.5 * (volume.noises_dn[1] + volume.noises_dn[2])
     assert volume.brightness_q_at(mid) == pytest.approx(0.5 * (volume.brightness_q_by_noise[1]
                                                               + volume.brightness_q_by_noise[2]))
+
+
+def test_wind_dims_each_size_as_its_streak_slants(volume):
+    """A drop drifting at u across its fall v(a) draws a streak slanted by u / v(a) and
+    crosses each pixel faster: the simulator's exposure integral (render_streaks) gives the
+    slanted streak's pixels cos(theta) of the straight one's change, the factor
+    wind_dimming predicts; the small, slow drops slant and dim the most."""
+    from raingauge.physics.drops import fall_velocity
+    from raingauge.render.simulator import render_streaks
+
+    a = np.array([0.25e-3, 0.6e-3, 1.2e-3, 2.0e-3])
+    dim = volume.wind_dimming(a, 3.0)
+    assert np.all(np.diff(dim) > 0) and np.all(dim < 1.0) and dim[0] < 0.6
+    assert np.array_equal(volume.wind_dimming(a, 0.0), np.ones(a.size))
+    v = fall_velocity(2 * a, model="gunn_kinzer")
+    r, L = 3.0, 60.0
+    for d, vi in zip(dim, v):
+        dx = L * 3.0 / vi
+        straight = render_streaks((160, 200), [(100.0, 40.0)], [(100.0, 40.0 + L)], [r], [math.pi * r * r])[0]
+        slanted = render_streaks((160, 200), [(100.0 - dx / 2, 40.0)], [(100.0 + dx / 2, 40.0 + L)], [r],
+                                 [math.pi * r * r])[0]
+        # a capsule's change is its area over that of the whole capsule (Eq. 17): the
+        # slanted one is longer by 1 / cos(theta) between the same end caps
+        ratio = slanted.max() / straight.max()
+        cap = math.pi * r * r
+        assert ratio == pytest.approx((2 * r * L + cap) / (2 * r * L / d + cap), rel=0.01)
+        # wind_dimming leaves out the end caps (a few % of a streak this long)
+        assert ratio == pytest.approx(d, rel=0.04)
+        # the exposure itself is conserved: the drop's area spread over a longer path
+        assert slanted.sum() == pytest.approx(straight.sum(), rel=0.01)
+
+
+def test_kappa_in_a_wind_is_kappa_at_the_dimmed_contrast(volume):
+    """With a cross wind each size is sampled as if its contrast were dimmed by
+    wind_dimming: kappa and the pass probability over a set of backgrounds (the two the
+    gauge and its completeness probe take) both, and no wind changes nothing."""
+    z0 = CAM.focus_distance_m
+    c = float(volume.contrasts_dn[12])                      # a node of the table's grid
+    w = volume.contrast_weights([c])
+    for a in (0.3e-3, 0.8e-3, 1.5e-3):
+        dim = float(volume.wind_dimming(a, 3.0))
+        assert volume.kappa(a, weights=w, wind_m_s=3.0) == pytest.approx(
+            volume.kappa(a, contrast_dn=c * dim), rel=0.02)
+        assert volume.pass_probability_over(a, z0, w, wind_m_s=3.0) == pytest.approx(
+            volume.pass_probability_over(a, z0, volume.contrast_weights([c * dim])), rel=1e-9, abs=1e-12)
+        assert volume.kappa(a, weights=w, wind_m_s=0.0) == volume.kappa(a, weights=w)
+    # the small drops, dimmed most, are sampled less in a wind
+    assert volume.kappa(0.3e-3, weights=w, wind_m_s=3.0) < 0.8 * volume.kappa(0.3e-3, weights=w)

@@ -12,7 +12,8 @@ the last ``window_s`` seconds::
 Per frame n (analysed when frame n+1 arrives): the spike image of Eq. (19)
 (exact in int16 from the 8-bit frames of a linear camera) smoothed along the
 fall (the direction follows the measured streaks, so wind-slanted rain is
-smoothed along its slant), labelled streaks with pieces merged
+smoothed along its slant; until drops are counted, the long streaks that passed
+the velocity law give it), labelled streaks with pieces merged
 (:func:`raingauge.gauge.streaks.detect_streaks`), a cheap size/speed screen
 from the labels' boxes, then all screened streaks of the frame measured at
 once in closed form (:func:`raingauge.gauge.streaks.measure_streak_table`:
@@ -36,7 +37,11 @@ kappa(a) the volume per image pixel in which the tests accept a drop of radius
 a in one frame, A_R the area in which its streak lies whole, p the chance that
 another streak of the frame touched it (:func:`merge_probability`, Poisson
 coverage from the frame's measured streak density; merged or hidden streaks
-are not measured).  So each frame estimates the density over one frame period
+are not measured; in a cross wind the streaks are parallelograms slanted alike,
+and their row widths, not their boxes, set the coverage).  In a cross wind u a
+drop crosses each pixel faster and its streak is dimmer by cos(theta),
+tan(theta) = u / v(a): kappa is taken at each size's dimmed contrast
+(:meth:`raingauge.gauge.volume.SampleVolume.wind_dimming`).  So each frame estimates the density over one frame period
 Delta, and a window's rate divides by the frames actually analysed: frames
 missing from the stream (``dropped_frames``) leave the rate unbiased, and a
 drop accepted in some of the frames that show it whole weighs what kappa says
@@ -169,6 +174,10 @@ MEASURABLE_SNR = 2.0
 #: uniform box across it: drops read 1-4, the two-signed changes of moving scenery 15-600.
 MAX_CROSS_CHI2 = 8.0
 
+#: Least length over width of a law-abiding streak whose direction is taken for the rain's
+#: while no drop was counted yet [-].
+LAW_SLOPE_MIN_ASPECT = 4.0
+
 #: Longest span [s] between a frame and either neighbour over which the three-frame test of
 #: Eq. (19) is still applied: across a longer outage the scene (light, wet surfaces) may
 #: change, so the frames on either side of it are not analysed (and not counted as observed).
@@ -227,7 +236,7 @@ def _sample_volume(profile, velocity_model: str, defocus_model: str, grow: float
 
 
 def merge_probability(width_px, height_px, other_widths_px, other_heights_px, shape, *,
-                      self_included=None) -> np.ndarray:
+                      self_included=None, slope: float = 0.0, area_px=None, other_area_px=None) -> np.ndarray:
     """Chance that a streak touches another one in the same frame [-] (Poisson coverage).
 
     Streaks lie in the frame as a Poisson germ-grain process: with lambda the density of
@@ -247,16 +256,49 @@ def merge_probability(width_px, height_px, other_widths_px, other_heights_px, sh
         Frame shape [px].
     self_included : (K,) bool array_like, optional
         Whether each streak is itself among the others (its own term is then removed).
+    slope : float
+        The rain's direction dx/dy [-].  From 0.05 on (a cross wind) the streaks are
+        parallelograms, not boxes: with ``area_px`` and ``other_area_px`` (their pixel
+        counts) each has its own row width area / h and slant (w - area / h) / h, and two
+        of them cover (r_S + r_G + 2)(h_S + h_G + 2) + |s_S - s_G| h_S h_G; without, all
+        share the slant ``slope``.
+    area_px, other_area_px : (K,), (G,) array_like, optional
+        Pixels of the streaks [px].
 
     Returns
     -------
     (K,) ndarray [-], capped at 0.8 (a frame that crowded measures little)
     """
-    ws = np.asarray(width_px, dtype=float) + 2.0
-    hs = np.asarray(height_px, dtype=float) + 2.0
+    ws = np.asarray(width_px, dtype=float)
+    hs = np.asarray(height_px, dtype=float)
     wg = np.asarray(other_widths_px, dtype=float)
     hg = np.asarray(other_heights_px, dtype=float)
     M, N = shape
+    s = abs(float(slope)) if abs(float(slope)) >= 0.05 else 0.0
+    if s and area_px is not None and other_area_px is not None:
+        # slanted streaks (the wind) are parallelograms of row width r = area / h slanted by
+        # their own |s_i| = (w - r) / h (small drops slant more): the Minkowski sum of two
+        # (grown by the pixel of 8-connectivity) has the area
+        # (r_S + r_G + 2)(h_S + h_G + 2) + |s_S - s_G| h_S h_G
+        hs1, hg1 = np.maximum(hs, 1.0), np.maximum(hg, 1.0)
+        rs = np.clip(np.asarray(area_px, dtype=float) / hs1, 1.0, np.maximum(ws, 1.0))
+        rg = np.clip(np.asarray(other_area_px, dtype=float) / hg1, 1.0, np.maximum(wg, 1.0))
+        ss = np.maximum(ws - rs, 0.0) / hs1
+        sg = np.maximum(wg - rg, 0.0) / hg1
+        pair = ((rs[:, None] + rg[None, :] + 2.0) * (hs[:, None] + hg[None, :] + 2.0)
+                + np.abs(ss[:, None] - sg[None, :]) * hs[:, None] * hg[None, :])
+        total = pair.sum(axis=1)
+        if self_included is not None:
+            own = np.asarray(self_included, bool)
+            total = total - np.where(own, (2.0 * rs + 2.0) * (2.0 * hs + 2.0), 0.0)
+        return np.minimum(1.0 - np.exp(-np.maximum(total, 0.0) / float(M * N)), 0.8)
+    if s:
+        # streaks slanted alike are parallelograms: their Minkowski sum is one whose rows
+        # are the sum of their row widths, the box's width less the slant
+        ws = np.maximum(ws - s * hs, 1.0)
+        wg = np.maximum(wg - s * hg, 1.0)
+    ws = ws + 2.0
+    hs = hs + 2.0
     n = wg.size
     total = n * ws * hs + ws * hg.sum() + hs * wg.sum() + float(np.sum(wg * hg))
     if self_included is not None:
@@ -501,6 +543,11 @@ class RainGauge:
         self._dilated = None
         self._slopes: deque = deque(maxlen=50)          # streak direction dx/dy of counted drops
         self._drifts: deque = deque(maxlen=50)          # their horizontal speed [m/s] (the wind)
+        # streak directions of the law-abiding streaks, measured before their drops are decided
+        # (the rain's direction while the drop brightness E_r is still unknown)
+        self._law_slopes: deque = deque(maxlen=50)
+        self._law_drifts: deque = deque(maxlen=50)       # and their drift dx z0 / (f T) [m/s]
+        self._frame_slope = 0.0                         # the direction the last frame was smoothed along
         self._pending: list = []                        # frames awaiting the E_r estimate
         self._rng = np.random.default_rng(12345)
         self._empty_scale = self._typical_drop_rate()
@@ -663,7 +710,8 @@ class RainGauge:
         self._frame_noise_change = max(noise, self.noise_change)
         self._noise_log.append(self._frame_noise_change / math.sqrt(1.5))
         flags = self._frame_flags(raw, cur, neighbour_change, gap)
-        slope = float(np.median(self._slopes)) if len(self._slopes) >= 5 else 0.0
+        slope = self._rain_slope()
+        self._frame_slope = slope
         # hysteresis only where the drops' contrast is low (their streaks pass c in patches)
         # and the scene is still (moving texture would grow into streaks)
         grow_here = "low_contrast" in flags and "scene_motion" not in flags
@@ -704,6 +752,12 @@ class RainGauge:
                 prepared, rejected = self._measure(labels, stats, cur - 0.5 * (prev + nxt), prev, cur, t)
         else:
             prepared = []
+        # (of the long ones: a short or blurred streak's axis is ill defined, its moments
+        # lean towards the vertical)
+        axial = [c for c in prepared if c["mot"] >= LAW_SLOPE_MIN_ASPECT * c["w_app"]]
+        self._law_slopes.extend(c["slope"] for c in axial)
+        k_drift = prof.focus_distance_m / (prof.focal_length_px * prof.exposure_s)
+        self._law_drifts.extend(c["dx"] * k_drift for c in axial)
         # the backgrounds E_b behind the streaks (a neighbour frame): the drop sizes they leave
         # visible set this frame's sample volume (raingauge.gauge.volume.SampleVolume.kappa)
         entry = [t, flags, rejected, self._last_mean_bg, background_histogram(prev),
@@ -725,6 +779,35 @@ class RainGauge:
                                                (self.probe is None or self.probe.mature)):
             self._resolve_pending()
 
+    def _rain_slope(self) -> float:
+        """The rain's direction in the image, dx/dy [-], that the detection smooths along.
+
+        The median direction of the last counted drops; until five were counted, that of the
+        last streaks that passed the velocity law (their drops wait for the drop brightness
+        E_r), taken from 0.05 on (below it the detection smooths straight down anyway).  In a
+        cross wind the streaks slant by u / v(a): smoothing straight down, a faint slanted
+        streak would not be detected, and the drops it would have counted not be counted
+        either."""
+        if len(self._slopes) >= 5:
+            return float(np.median(self._slopes))
+        if len(self._law_slopes) >= 5:
+            s = float(np.median(self._law_slopes))
+            return s if abs(s) >= 0.05 else 0.0
+        return 0.0
+
+    def _wind_m_s(self) -> float:
+        """The drops' drift across the image [m/s] the sample volume is taken at
+        (:meth:`raingauge.gauge.volume.SampleVolume.wind_dimming`): the median of the last
+        counted drops' (until five were counted, of the law-abiding streaks' at z0); 0
+        while the rain falls straight down in the image (:meth:`_rain_slope` under 0.05)."""
+        if abs(self._rain_slope()) < 0.05:
+            return 0.0
+        if len(self._drifts) >= 5:
+            return float(np.median(self._drifts))
+        if len(self._law_drifts) >= 5:
+            return float(np.median(self._law_drifts))
+        return 0.0
+
     def _run_probe(self, frames, raws, occupied, slope, vol, t, *, ref_bg, contrast, hist, noise_dn) -> None:
         """Inject the completeness probe's artificial drops into crops of this frame, run them
         through the frame's detection, measurement and tests, and log which pass
@@ -743,7 +826,8 @@ class RainGauge:
         spike = spike_image(*raw) if raw is not None else spike_image(*lin)
         lab_c, st_c = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope, grow=vol.grow)
         weights = self.volume.histogram_weights(hist, min(e_r, self._white_dn))
-        floor = self._kappa_floor(weights, vol)
+        wind = self._wind_m_s()
+        floor = self._kappa_floor(weights, vol, wind)
         # what the model expects the gauge to make of each drop: p(a, z) at the contrast
         # behind it, times its share of the rate (2 a)^3 v / kappa(a)
         expected = np.zeros(len(plan))
@@ -754,12 +838,12 @@ class RainGauge:
             xa = int(round(min(p["p0"][0], p["p1"][0]))) - r
             xb = int(round(max(p["p0"][0], p["p1"][0]))) + r + 1
             behind = frames[0][int(p["p0"][1]):int(p["p1"][1]) + 1, max(xa, 0):xb]
-            kap = float(vol.kappa(p["radius_m"], weights=weights, noise_dn=noise_dn))
+            kap = float(vol.kappa(p["radius_m"], weights=weights, noise_dn=noise_dn, wind_m_s=wind))
             if behind.size and kap >= floor:
                 # p over the pixels behind the drop, averaged as kappa averages it over the
                 # frame's pixels: the ratio then corrects that kappa and no other model of it
                 local = vol.contrast_weights(min(e_r, self._white_dn) - behind)
-                p_pass[j] = vol.pass_probability_over(p["radius_m"], p["depth_m"], local, noise_dn)
+                p_pass[j] = vol.pass_probability_over(p["radius_m"], p["depth_m"], local, noise_dn, wind_m_s=wind)
                 expected[j] = p_pass[j] * (2.0 * p["radius_m"]) ** 3 * p["velocity_m_s"] / kap
         # what the gauge makes of each injected drop: its share of the rate,
         # (2 a)^3 v / kappa(a) with a, v and kappa as measured (0 when it is not counted)
@@ -781,7 +865,7 @@ class RainGauge:
                 a = self._drop_radius(c, e_r, vol)
                 if a is None:
                     continue
-                kap = float(vol.kappa(a, weights=weights, noise_dn=noise_dn))
+                kap = float(vol.kappa(a, weights=weights, noise_dn=noise_dn, wind_m_s=wind))
                 if not kap >= floor:
                     continue
                 v = c["mot"] * float(vol.depth_m(a)) / (f * prof.exposure_s)
@@ -944,8 +1028,10 @@ class RainGauge:
         others = np.asarray(valid, bool).copy()
         others[0] = False
         others &= stats[:, 4] > 0
+        area = stats[:, 4].astype(float)
         return merge_probability(box_w[idx], box_h[idx], box_w[others], box_h[others], labels.shape,
-                                 self_included=others[idx])
+                                 self_included=others[idx], slope=self._frame_slope,
+                                 area_px=area[idx], other_area_px=area[others])
 
     def _measure(self, labels, stats, change, prev, cur, t, ref_bg=None):
         prof = self.profile
@@ -1047,6 +1133,7 @@ class RainGauge:
         # the accumulation fills the unobserved frame periods before this frame, half with
         # its rain, half with the rain of the frame before the gap (trapezoid rule)
         fill = 1.0 + self._half_gap(steps)
+        wind = self._wind_m_s()
         if prepared:
             self._prune_tracks(prepared[0]["t"])
         for c in prepared:
@@ -1058,9 +1145,9 @@ class RainGauge:
                 self.rejections["defocus_photometric"] += 1
                 continue
             frame_weights = self._frame_weights(c, e_r)
-            kap = float(vol.kappa(a, weights=frame_weights, noise_dn=c.get("noise_dn")))
+            kap = float(vol.kappa(a, weights=frame_weights, noise_dn=c.get("noise_dn"), wind_m_s=wind))
             area = float(whole_streak_area_px2((dx, mot), w_app, prof.shape)) / self._frame_interval
-            if not kap >= self._kappa_floor(frame_weights, vol) or area <= 0:
+            if not kap >= self._kappa_floor(frame_weights, vol, wind) or area <= 0:
                 rejected += 1
                 self.rejections["no_volume"] += 1
                 continue
@@ -1152,15 +1239,15 @@ class RainGauge:
         cap = max(int(round(MAX_FILLED_GAP_S / self._frame_interval)), 1)
         return 0.5 * (min(steps, cap) - 1)
 
-    def _kappa_floor(self, weights, volume=None) -> float:
+    def _kappa_floor(self, weights, volume=None, wind_m_s: float = 0.0) -> float:
         """:data:`KAPPA_FLOOR_REL` times the largest kappa over the sizes, for a frame's
-        contrast weights (None: the volume's nominal contrast) [m^3/px^2]."""
+        contrast weights (None: the volume's nominal contrast) and the wind [m^3/px^2]."""
         vol = self.volume if volume is None else volume
-        key = (None if weights is None else id(weights), id(vol))
+        key = (None if weights is None else id(weights), id(vol), wind_m_s)
         cached = getattr(self, "_kappa_floor_cache", None)
         if cached is None or cached[0] != key or cached[1] is not weights:
             grid = np.geomspace(0.05e-3, 5e-3, 120)
-            peak = float(np.nanmax(vol.kappa(grid, weights=weights)))
+            peak = float(np.nanmax(vol.kappa(grid, weights=weights, wind_m_s=wind_m_s)))
             self._kappa_floor_cache = (key, weights, KAPPA_FLOOR_REL * peak if peak > 0 else math.inf)
         return self._kappa_floor_cache[2]
 

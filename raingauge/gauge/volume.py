@@ -743,7 +743,47 @@ class SampleVolume:
         self._q_nodes[key] = val
         return val
 
-    def kappa(self, radius_m, contrast_dn=None, *, weights=None, noise_dn=None) -> np.ndarray:
+    def wind_dimming(self, radius_m, wind_m_s: float) -> np.ndarray:
+        """Factor by which a cross wind dims a drop's streak, per pixel [-].
+
+        A drop of radius a drifting at u across its fall v(a) moves along a path slanted
+        by tan(theta) = u / v(a) and crosses each pixel in cos(theta) of the time it takes
+        falling straight (Eq. 16 [GargNayar2007] with the image speed sqrt(u^2 + v^2)):
+        its change beta (E_r - E_b) is that of a straight streak at the contrast
+        cos(theta) (E_r - E_b) (the end caps, which do not lengthen, are left out: a few
+        per cent of a streak several widths long).  The row sums across the streak are
+        unchanged (its rows are wider by 1 / cos(theta)); the detection's per-pixel test
+        is not.
+        """
+        from raingauge.physics.drops import fall_velocity
+
+        a = np.asarray(radius_m, dtype=float)
+        v = np.asarray(fall_velocity(2.0 * a, model=self.rain_velocity_model or self.velocity_model), dtype=float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = float(wind_m_s) / v
+        return np.where(np.isfinite(r), 1.0 / np.sqrt(1.0 + r * r), 0.0)
+
+    def _dimmed_weights(self, weights, factor) -> np.ndarray:
+        """Contrast weights (n_contrasts,) moved to the contrasts ``factor`` (K,) times theirs,
+        linear in log C as :meth:`contrast_weights` (mass below the grid is lost) -> (K, n_contrasts)."""
+        w = np.asarray(weights, dtype=float)
+        f = np.atleast_1d(np.asarray(factor, dtype=float))
+        grid = self._log_contrasts
+        n = grid.size
+        with np.errstate(divide="ignore"):
+            lc = grid[None, :] + np.log(np.maximum(f, 1e-300))[:, None]
+        seen = lc >= grid[0]
+        lc = np.clip(lc, grid[0], grid[-1])
+        i = np.clip(np.searchsorted(grid, lc.ravel(), side="right") - 1, 0, n - 2).reshape(lc.shape)
+        t = np.clip((lc - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0)
+        mass = np.where(seen, w[None, :], 0.0)
+        row = (np.arange(f.size) * n)[:, None]
+        out = (np.bincount((row + i).ravel(), (mass * (1.0 - t)).ravel(), minlength=f.size * n)
+               + np.bincount((row + i + 1).ravel(), (mass * t).ravel(), minlength=f.size * n))
+        return out.reshape(f.size, n)
+
+    def kappa(self, radius_m, contrast_dn=None, *, weights=None, noise_dn=None,
+              wind_m_s: float = 0.0) -> np.ndarray:
         """kappa(a) [m^3 per px^2 of image], 0 below the measurable size.
 
         Parameters
@@ -757,9 +797,25 @@ class SampleVolume:
         noise_dn : float, optional
             The frame's noise [gray levels] (the change image's over sqrt(1.5); default the
             profile's).
+        wind_m_s : float
+            The drops' drift across the image [m/s]: each size is seen at its streak's
+            dimmed contrast (:meth:`wind_dimming`).
         """
         a = np.asarray(radius_m, dtype=float)
-        if weights is None and contrast_dn is None and noise_dn is None:
+        wind = float(wind_m_s) if np.isfinite(wind_m_s) else 0.0
+        if wind != 0.0:
+            w = (self.contrast_weights([float(self.contrast_dn if contrast_dn is None else contrast_dn)])
+                 if weights is None else np.asarray(weights, dtype=float))
+            key = ("wind", w.tobytes(), None if noise_dn is None else float(noise_dn), wind)
+            cached = getattr(self, "_kappa_col", None)
+            if cached is not None and cached[0] == key:
+                col = cached[1]
+            else:
+                table = self._noise_slice(noise_dn)
+                dimmed = self._dimmed_weights(w, self.wind_dimming(self.radii_m, wind))
+                col = np.einsum("ij,ij->i", table, dimmed)
+                self._kappa_col = (key, col)
+        elif weights is None and contrast_dn is None and noise_dn is None:
             col = self.kappa_m3_px2
         else:
             w = None if weights is None else np.asarray(weights, dtype=float)
@@ -867,7 +923,7 @@ class SampleVolume:
         return nodes
 
     def pass_probability_over(self, radius_m: float, z_m: float, weights,
-                              noise_dn: float | None = None) -> float:
+                              noise_dn: float | None = None, wind_m_s: float = 0.0) -> float:
         """p(a, z) averaged over the contrasts of a set of background pixels [-].
 
         ``weights`` are their :meth:`contrast_weights`, the same average over pixels
@@ -884,8 +940,13 @@ class SampleVolume:
             :meth:`contrast_weights` of the pixels behind the drop.
         noise_dn : float, optional
             The frame's noise (default the profile's) [gray levels].
+        wind_m_s : float
+            The drops' drift across the image [m/s] (:meth:`wind_dimming`, as :meth:`kappa`).
         """
-        return float(np.asarray(weights, dtype=float) @ self._p_nodes(radius_m, z_m, noise_dn))
+        w = np.asarray(weights, dtype=float)
+        if wind_m_s and np.isfinite(wind_m_s):
+            w = self._dimmed_weights(w, self.wind_dimming(radius_m, wind_m_s))[0]
+        return float(w @ self._p_nodes(radius_m, z_m, noise_dn))
 
     def true_radius_m(self, apparent_radius_m) -> np.ndarray:
         """Invert a' = a F(a): the drop radius behind an apparent radius at z0 [m]."""
