@@ -52,6 +52,19 @@ def main(argv=None) -> int:
 
     w, h = (int(v) for v in args.size.lower().split("x"))
     profile = default_profile().replace(width_px=w, height_px=h)
+    # the compiled measurement loops are compiled (or loaded from numba's cache) once per
+    # process: on a short clip before the timings
+    t0 = time.process_time()
+    warm, _ = render_clip(profile, n_frames=40, rain_rate_mm_h=30.0, seed=1, background="uniform:40")
+    t_render = time.process_time() - t0
+    t0 = time.process_time()
+    g = RainGauge(profile, window_s=60.0, step_s=10.0, velocity_model="gunn_kinzer")
+    for fr in warm:
+        g.process(fr)
+    g.flush()
+    print(f"# warm-up (compiling or loading the measurement loops): {time.process_time() - t0:.1f} s CPU "
+          f"(rendering it {t_render:.1f} s)")
+    del warm, g
     print(f"# gauge speed at {w}x{h}, one core (cv2 threads {cv2.getNumThreads()}), {args.frames} frames per clip, "
           f"CPU time")
     for background in args.backgrounds.split(","):

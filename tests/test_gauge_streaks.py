@@ -296,23 +296,31 @@ def test_streak_in_many_pieces_is_one_label():
     np.testing.assert_array_equal(labels == right, apart == right)
 
 
-def test_streak_table_does_not_depend_on_the_selection():
+ENGINES = ["arrays", pytest.param("compiled", marks=pytest.mark.skipif(
+    not __import__("raingauge.gauge._kernels", fromlist=["AVAILABLE"]).AVAILABLE, reason="numba not installed"))]
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_streak_table_does_not_depend_on_the_selection(engine):
     """Each streak's measurement is its own: measured alone or with all the others of the
-    frame (whatever a screen keeps), it gives the same numbers."""
+    frame (whatever a screen keeps), it gives the same numbers.  Also for a wide streak
+    (a near, defocused drop) whose box fit reaches beyond every other streak's pixels."""
     from raingauge.gauge.streaks import measure_streak_table
 
     rng = np.random.default_rng(9)
     shape = (150, 220)
     img = np.zeros(shape)
-    for x0, dx, w in ((20.3, 0.0, 3.0), (31.7, 4.0, 5.0), (90.2, 20.0, 6.5), (150.5, 0.0, 1.6), (190.0, -6.0, 9.0)):
-        img += capsule_change(shape, x0=x0, y0=15.0 + x0 / 10, dx=dx, dy=90.0, width=w, contrast=140.0)
+    for x0, y0, dx, w in ((20.3, 17.0, 0.0, 3.0), (31.7, 18.2, 4.0, 5.0), (60.0, 6.0, 0.0, 22.0),
+                          (90.2, 24.0, 20.0, 6.5), (150.5, 30.0, 0.0, 1.6), (190.0, 34.0, -6.0, 9.0)):
+        img += capsule_change(shape, x0=x0, y0=y0, dx=dx, dy=90.0, width=w, contrast=140.0)
     frames = [rng.normal(50.0, 2.0, shape).astype(np.float32) for _ in range(3)]
     frames[1] += img.astype(np.float32)
     spike = np.minimum(frames[1] - frames[0], frames[1] - frames[2])
     labels, stats = detect_streaks(spike, c=3.0)
     sel = np.nonzero(stats[:, 4] > 0)[0]
-    assert sel.size >= 4
-    kw = dict(cur=frames[1], prev=frames[0], noise_sigma=2.0 * math.sqrt(1.5))
+    assert sel.size >= 5
+    assert stats[sel[0], 2] > 20                     # the wide streak comes first
+    kw = dict(cur=frames[1], prev=frames[0], noise_sigma=2.0 * math.sqrt(1.5), engine=engine)
     together = measure_streak_table(tuple(frames), labels, stats, sel, **kw)
     for i, lab in enumerate(sel):
         alone = measure_streak_table(tuple(frames), labels, stats, [lab], **kw)
@@ -321,6 +329,24 @@ def test_streak_table_does_not_depend_on_the_selection():
         mine = together["own_k"] == i
         np.testing.assert_array_equal(alone["own_y"], together["own_y"][mine])
         np.testing.assert_array_equal(alone["own_x"], together["own_x"][mine])
+
+
+def test_box_width_fit_keeps_to_each_streak():
+    """The least-squares box width of a streak whose pixels all lie inside the widest boxes
+    tried (its band cut short of its edges) is fitted on its own pixels: the same alone as
+    before the pixels of another streak."""
+    from raingauge.gauge.streaks import _refine_box_width
+
+    u0 = np.tile(np.linspace(-2.0, 2.0, 41), 10)     # 10 rows of a streak's plateau
+    v0 = 1.0 + 0.1 * (2.0 - np.abs(u0))             # peaked, every box covering it fits alike
+    u1 = np.linspace(-1.0, 1.0, 5)
+    v1 = np.full(u1.size, -10.0)                      # (a darkening: moving scenery)
+    alone = _refine_box_width(np.zeros(u0.size, np.int64), u0, v0, np.zeros(1), np.array([6.0]), 1)
+    ks = np.concatenate([np.zeros(u0.size, np.int64), np.ones(u1.size, np.int64)])
+    both = _refine_box_width(ks, np.concatenate([u0, u1]), np.concatenate([v0, v1]), np.zeros(2),
+                             np.array([6.0, 2.0]), 2)
+    assert both[0] == pytest.approx(alone[0], rel=1e-12)
+    assert alone[0] < 6.0                             # the narrowest box holding all its pixels
 
 
 def test_group_sums_equal_bincount_with_empty_groups():
@@ -421,3 +447,47 @@ def test_hysteresis_keeps_a_faint_streak_whole():
     noise = rng.normal(0, 0.5, shape).astype(np.float32)
     _, stats = detect_streaks(noise, c=3.0, grow=0.5)
     assert not np.any(stats[1:, 4] > 0)
+
+
+@pytest.mark.skipif(not __import__("raingauge.gauge._kernels", fromlist=["AVAILABLE"]).AVAILABLE,
+                    reason="numba not installed")
+@pytest.mark.parametrize("background", ["uniform:0.05", "skimage:brick"])
+def test_compiled_streak_table_equals_the_array_form(background):
+    """The compiled per-streak loops (raingauge.gauge._kernels) measure simulated rain as the
+    array form does, up to the order of summation: the same streaks measurable, the same
+    own pixels, the numbers within 1e-6 (both with and without the division by the local
+    contrast of Eq. 18).  A sum that differs in its last bit may move a pixel lying exactly
+    on the edge of the moment's window (a streak on the pixel grid) to the other side: a
+    few streaks may differ by that pixel."""
+    from raingauge.gauge.streaks import PER_STREAK_KEYS, measure_streak_table
+    from raingauge.render.simulator import render_clip
+
+    prof = CAM.replace(width_px=480, height_px=270)
+    frames, _ = render_clip(prof, n_frames=3, rain_rate_mm_h=50.0, seed=3, background=background)
+    lin = [np.asarray(f, np.float32) for f in frames]
+    labels, stats = detect_streaks(np.minimum(lin[1] - lin[0], lin[1] - lin[2]), c=3.0)
+    sel = np.nonzero(stats[1:, 4] > 0)[0] + 1
+    assert sel.size >= 20
+    for contrast in (None, (200.0, 150.0)):
+        kw = dict(valid=stats[:, 4] > 0, cur=lin[1], prev=lin[0], contrast=contrast, noise_sigma=2.0)
+        a = measure_streak_table(tuple(lin), labels, stats, sel, engine="arrays", **kw)
+        b = measure_streak_table(tuple(lin), labels, stats, sel, engine="compiled", **kw)
+        np.testing.assert_array_equal(a["ok"], b["ok"])
+        assert a["ok"].sum() >= 10
+        for key in PER_STREAK_KEYS:
+            if key == "ok":
+                continue
+            same = np.isclose(b[key], a[key], rtol=1e-6, atol=1e-6, equal_nan=True)
+            assert same.mean() >= 0.95, (key, np.flatnonzero(~same))
+        assert np.isclose(b["width_apparent"], a["width_apparent"], rtol=1e-6, equal_nan=True).sum() >= sel.size - 2
+        for key in ("own_k", "own_y", "own_x"):
+            np.testing.assert_array_equal(b[key], a[key])
+
+
+def test_streak_table_engine_is_checked():
+    from raingauge.gauge.streaks import measure_streak_table
+
+    labels = np.zeros((20, 20), np.int32)
+    stats = np.zeros((1, 5), np.int64)
+    with pytest.raises(ValueError, match="engine"):
+        measure_streak_table(np.zeros((20, 20), np.float32), labels, stats, [], engine="gpu")

@@ -40,6 +40,8 @@ from functools import cached_property
 
 import numpy as np
 
+from raingauge.gauge import _kernels
+
 __all__ = [
     "StreakProps",
     "StreakSet",
@@ -1341,7 +1343,9 @@ def _refine_box_width(ks, o, v, cen, w0, K):
     c_in = np.minimum(1.0, 2.0 * hw)
     kofs = (np.arange(K) * span)[:, None]
     i0 = np.searchsorted(key, kofs).astype(np.int64)
-    ia = np.searchsorted(key, kofs + a_, side="right")
+    # (both boundaries held inside the streak's own run of keys: a box wider than its
+    # farthest pixel covers them all)
+    ia = np.searchsorted(key, kofs + np.minimum(a_, span - 1.0), side="right")
     ib = np.searchsorted(key, kofs + np.minimum(b_, span - 1.0), side="left")
 
     def seg(c, lo_i, hi_i):
@@ -1571,7 +1575,7 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
                          valid: np.ndarray | None = None, margin_px: int = 4,
                          sigma_min: float = SHARP_SIGMA_PX, cur: np.ndarray | None = None,
                          prev: np.ndarray | None = None, contrast=None, noise_sigma: float = 2.0,
-                         baseline: bool = True) -> dict:
+                         baseline: bool = True, engine: str | None = None) -> dict:
     """Closed-form measurement of many uniform streaks at once (no iteration, no loop over streaks).
 
     The same quantities as :class:`StreakProps` (``shape="uniform"``), from moments instead
@@ -1611,6 +1615,11 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
         focused streak of frame n by a smooth offset (over n raises it); the flanks of the
         streak see the same offset, so the plateau, the width and the ends are measured
         on the streak's own change.
+    engine : {"compiled", "arrays"}, optional
+        How the per-streak profiles are computed: one compiled loop per streak
+        (:mod:`raingauge.gauge._kernels`, needs numba; the default when it is installed) or
+        whole-frame array operations (the reference; the default without numba).  They
+        agree up to the order of summation.
 
     Returns
     -------
@@ -1623,8 +1632,10 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     L = np.asarray(select, dtype=np.int64)
     if valid is None:
         valid = stats[:, 4] > 0
-    own = _own_streak_pixels(change, labels, stats, L, margin_px=margin_px, cur=cur, prev=prev, contrast=contrast)
-    kw = dict(margin_px=margin_px, sigma_min=sigma_min, cur=cur, contrast=contrast, noise_sigma=noise_sigma)
+    own = _own_streak_pixels(change, labels, stats, L, margin_px=margin_px, cur=cur, prev=prev, contrast=contrast,
+                             engine=engine)
+    kw = dict(margin_px=margin_px, sigma_min=sigma_min, cur=cur, contrast=contrast, noise_sigma=noise_sigma,
+              engine=engine)
     if not baseline:
         return _profile_pass(change, labels, valid, own, **kw)
     # against the flanks just beyond the detected pixels
@@ -1646,7 +1657,20 @@ _OWN_PER_STREAK = ("L", "x", "y", "w", "h", "y0", "y1", "ch", "xm", "ym", "slope
                    "background_dn", "beta")
 
 
-def _own_streak_pixels(change, labels, stats, L, *, margin_px, cur, prev, contrast) -> dict:
+def _use_compiled(engine: str | None) -> bool:
+    """Whether :func:`measure_streak_table` runs its compiled per-streak loop."""
+    if engine is None:
+        return _kernels.AVAILABLE
+    if engine == "arrays":
+        return False
+    if engine == "compiled":
+        if not _kernels.AVAILABLE:
+            raise ImportError("engine='compiled' needs numba. Fix: pip install numba, or use engine='arrays'")
+        return True
+    raise ValueError(f"engine must be 'compiled' or 'arrays', got {engine!r}")
+
+
+def _own_streak_pixels(change, labels, stats, L, *, margin_px, cur, prev, contrast, engine=None) -> dict:
     """What a streak's own (detected) pixels give, once for both passes of
     :func:`measure_streak_table`: its box and rows, its axis from the moments of their
     positive change, the detected width along a row, and the background and photometric
@@ -1660,6 +1684,12 @@ def _own_streak_pixels(change, labels, stats, L, *, margin_px, cur, prev, contra
     y0 = np.maximum(y - m, 0)
     y1 = np.minimum(y + h + m, M)
     ch = y1 - y0
+    if _use_compiled(engine):
+        xm, ym, slope, row_width, bg_dn, beta, ko, oy, ox = _kernels.own_pixels(
+            change, labels, L, x, y, w, h, x0, y0, y1, cur=cur, prev=prev, contrast=contrast)
+        return {"L": L, "x": x, "y": y, "w": w, "h": h, "y0": y0, "y1": y1, "ch": ch, "xm": xm, "ym": ym,
+                "slope": slope, "row_width": row_width, "background_dn": bg_dn, "beta": beta,
+                "own_k": ko, "own_y": oy, "own_x": ox}
     box = _crop_pixels(x, x + w, y, y + h)
     kq, gyq, gxq = box[4], box[7], box[8]
     flat_q = gyq * N + gxq
@@ -1709,7 +1739,8 @@ def _subset_streaks(own: dict, keep: np.ndarray) -> dict:
 
 
 def _profile_pass(change, labels, valid, own, *, margin_px: int = 4, sigma_min: float = SHARP_SIGMA_PX,
-                  cur=None, contrast=None, noise_sigma: float = 2.0, baseline_width=None) -> dict:
+                  cur=None, contrast=None, noise_sigma: float = 2.0, baseline_width=None,
+                  engine: str | None = None) -> dict:
     """One pass of :func:`measure_streak_table` over the streaks of ``own``
     (:func:`_own_streak_pixels`); with ``baseline_width`` (K,) [px] the band reaches beyond
     half of max(detected row width, baseline_width) and its flanks there set each streak's
@@ -1726,6 +1757,20 @@ def _profile_pass(change, labels, valid, own, *, margin_px: int = 4, sigma_min: 
     x, y, w, h = own["x"], own["y"], own["w"], own["h"]
     y0, y1, ch = own["y0"], own["y1"], own["ch"]
     xm, ym, slope, row_width = own["xm"], own["ym"], own["slope"], own["row_width"]
+    if _use_compiled(engine):
+        w_app, top_r, bot_r, plateau, chi2, ok = _kernels.profile_pass(
+            change, labels, valid, own, margin_px=margin_px, sigma_min=sigma_min, cur=cur, contrast=contrast,
+            noise_sigma=noise_sigma, baseline_width=baseline_width, factors=_BOX_FACTORS,
+            flank_gap=FLANK_GAP_PX, flank_min=FLANK_MIN_PIXELS, flank_half_rows=FLANK_HALF_ROWS)
+        cap = cap_offset_px(np.where(np.isfinite(w_app), w_app, 1.0))
+        top = top_r + cap
+        bot = bot_r - cap
+        empty_i = np.zeros(0, np.int64)
+        return {"label": L, "xm": xm, "ym": ym, "slope": slope, "width_apparent": w_app, "top": top,
+                "bottom": bot, "motion": bot - top, "plateau": plateau, "background_dn": own["background_dn"],
+                "beta": own["beta"], "chi2": chi2, "ok": ok, "row_width": row_width,
+                "own_k": own.get("own_k", empty_i), "own_y": own.get("own_y", empty_i),
+                "own_x": own.get("own_x", empty_i)}
     m = int(margin_px)
     # the band used below reaches 0.5 w_row + 1.5 + m/2 px from the axis, which lies inside
     # the detected pixels: m + 2 px beyond the box hold it

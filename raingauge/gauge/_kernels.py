@@ -1,0 +1,487 @@
+"""Compiled per-streak loops of :func:`raingauge.gauge.streaks.measure_streak_table`.
+
+The array form of the closed-form measurement (:func:`raingauge.gauge.streaks._profile_pass`)
+spends most of its time building and reducing long lists of band pixels; the same
+arithmetic as one loop per streak, compiled by numba, runs several times faster and
+allocates almost nothing.  Both give the same measurement up to the order in which sums
+are taken (tests/test_gauge_streaks.py compares them on simulated rain).
+
+Without numba the array form is used: ``AVAILABLE`` says which.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+try:  # pragma: no cover - exercised by whichever is installed
+    import numba
+
+    AVAILABLE = True
+except ImportError:  # pragma: no cover
+    numba = None
+    AVAILABLE = False
+
+__all__ = ["AVAILABLE", "own_pixels", "profile_pass"]
+
+
+def _jit(fn):
+    if not AVAILABLE:
+        return fn
+    return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+
+
+@_jit
+def _median(a, n):
+    """Median of a[:n] (mean of the two middle values for even n; NaN for none)."""
+    if n == 0:
+        return np.nan
+    s = np.sort(a[:n])
+    if n % 2 == 1:
+        return s[(n - 1) // 2]
+    return (s[n // 2 - 1] + s[n // 2]) / 2.0
+
+
+def _jit_sums(fn):
+    # sums whose order may be changed (vectorised): no assumption about NaN or infinity
+    if not AVAILABLE:
+        return fn
+    return numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "contract"})(fn)
+
+
+@_jit_sums
+def _box_gain(uu, vv, nk, hw):
+    """The least-squares gain (sum c v)^2 / sum c^2 of a pixel-integrated box of half width
+    ``hw`` over the pixels at |offset| uu[:nk] with change vv[:nk] (-inf when the fit is
+    void).  A pixel at |u| is covered by min(min(1, 2 hw), max(hw + 1/2 - |u|, 0))."""
+    c_in = 2.0 * hw if 2.0 * hw < 1.0 else 1.0
+    b_ = hw + 0.5
+    svc = 0.0
+    scc = 0.0
+    for i in range(nk):
+        cov = min(c_in, max(b_ - uu[i], 0.0))
+        svc += cov * vv[i]
+        scc += cov * cov
+    if scc > 0 and svc > 0:
+        return svc * svc / scc
+    return -np.inf
+
+
+@_jit
+def _refine_box_width(o, v, n, cen, w0, factors):
+    """:func:`raingauge.gauge.streaks._refine_box_width` for one streak: least-squares
+    width of a pixel-integrated box (height free) over the pixels at offsets o[:n] with
+    change v[:n], on the grid w0 * factors refined by a parabola in ln w."""
+    good = math.isfinite(w0) and math.isfinite(cen) and w0 > 0
+    if good:
+        base = w0 if w0 > 0.6 else 0.6
+        c = cen
+    else:
+        base = 1.0
+        c = 0.0
+    nf = factors.size
+    reach = 0.5 * base * factors[nf - 1] + 1.0
+    uu = np.empty(n)
+    vv = np.empty(n)
+    nk = 0
+    for i in range(n):
+        u = abs(o[i] - c)
+        if u <= reach:
+            uu[nk] = u
+            vv[nk] = v[i]
+            nk += 1
+    gain = np.empty(nf)
+    for j in range(nf):
+        gain[j] = _box_gain(uu, vv, nk, 0.5 * base * factors[j])
+    jbest = 0
+    best = gain[0]
+    for j in range(1, nf):
+        if gain[j] > best:
+            best = gain[j]
+            jbest = j
+    jj = min(max(jbest, 1), nf - 2)
+    g0, g1, g2 = gain[jj - 1], gain[jj], gain[jj + 1]
+    den = g0 - 2 * g1 + g2
+    shift = 0.0
+    if den < 0 and math.isfinite(den):
+        shift = 0.5 * (g0 - g2) / den
+    shift = min(max(shift, -1.0), 1.0)
+    step = math.log(factors[1] / factors[0])
+    w_fit = base * factors[jj] * math.exp(shift * step)
+    inside = jbest >= 1 and jbest <= nf - 2 and math.isfinite(gain[jbest])
+    return w_fit if (good and inside) else w0
+
+
+@_jit
+def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, labels, valid,
+          L, x, y, w, h, y0, y1, ch, xm, ym, slope, row_width, bw, has_bw, m, sigma_min,
+          noise_sigma, factors, flank_gap, flank_min, flank_half_rows):
+    K = L.size
+    M, N = labels.shape
+    w_out = np.full(K, np.nan)
+    top_out = np.zeros(K)
+    bot_out = np.zeros(K)
+    plat_out = np.full(K, np.nan)
+    chi2_out = np.full(K, np.inf)
+    ok_out = np.zeros(K, np.bool_)
+    noise2 = max(noise_sigma, 1e-3) ** 2
+    for k in range(K):
+        mh = m + 2
+        band_width = row_width[k]
+        if has_bw:
+            mh += int(math.ceil(0.5 * bw[k]))
+            if bw[k] > band_width:
+                band_width = bw[k]
+        x0 = max(x[k] - mh, 0)
+        x1 = min(x[k] + w[k] + mh, N)
+        half = 0.5 * band_width + 1.5 + m / 2
+        nrow = ch[k]
+        yk0 = y0[k]
+        lab_k = L[k]
+        cap = nrow * (x1 - x0)
+        p_row = np.empty(cap, np.int64)
+        p_ob = np.empty(cap)
+        p_val = np.empty(cap)
+        np_ = 0
+        row_sum = np.zeros(nrow)
+        f_sum = np.zeros(nrow)
+        f_n = np.zeros(nrow)
+        flank_at = 0.5 * band_width + flank_gap
+        for r in range(nrow):
+            gy = yk0 + r
+            ax = xm[k] + slope[k] * (gy - ym[k])
+            bx0 = int(math.floor(ax - half))
+            bx0 = min(max(bx0, x0), x1)
+            bx1 = int(math.ceil(ax + half)) + 1
+            bx1 = min(max(bx1, bx0), x1)
+            for gx in range(bx0, bx1):
+                ob = gx - ax
+                if abs(ob) > half:
+                    continue
+                lab = labels[gy, gx]
+                if lab != 0 and lab != lab_k and valid[lab]:
+                    continue
+                if tuple_mode:
+                    raw = np.float64(c_[gy, gx]) - 0.5 * (np.float64(p_[gy, gx]) + np.float64(n_[gy, gx]))
+                else:
+                    raw = np.float64(c_[gy, gx])
+                val = raw
+                if has_contrast and has_cur:
+                    cg = np.float64(cur[gy, gx])
+                    d = e_r - (cg - raw)
+                    lim = 0.25 * c_ref
+                    val = raw * (c_ref / (d if d > lim else lim))
+                p_row[np_] = r
+                p_ob[np_] = ob
+                p_val[np_] = val
+                np_ += 1
+                if has_bw and abs(ob) > flank_at:
+                    f_sum[r] += val
+                    f_n[r] += 1.0
+        if has_bw:
+            base = np.zeros(nrow)
+            for r in range(nrow):
+                lo = max(r - flank_half_rows, 0)
+                hi = min(r + flank_half_rows, nrow - 1)
+                sv = 0.0
+                sn = 0.0
+                for q in range(lo, hi + 1):
+                    sv += f_sum[q]
+                    sn += f_n[q]
+                if sn >= flank_min:
+                    base[r] = sv / sn
+            for i in range(np_):
+                p_val[i] -= base[p_row[i]]
+        for i in range(np_):
+            row_sum[p_row[i]] += p_val[i]
+        # 3-row smoothing, zero padded
+        sm = np.empty(nrow)
+        for r in range(nrow):
+            a = row_sum[r - 1] if r > 0 else 0.0
+            b = row_sum[r + 1] if r + 1 < nrow else 0.0
+            sm[r] = (a + row_sum[r] + b) / 3.0
+        # plateau: median over the middle half of the streak's rows
+        buf = np.empty(nrow)
+        nb = 0
+        lo_y = y[k] + 0.25 * h[k]
+        hi_y = y[k] + 0.75 * h[k]
+        for r in range(nrow):
+            gy = yk0 + r
+            if gy >= lo_y and gy <= hi_y:
+                buf[nb] = sm[r]
+                nb += 1
+        if nb < 2:
+            for r in range(nrow):
+                buf[r] = sm[r]
+            nb = nrow
+        plateau = _median(buf, nb)
+        lvl = 0.5 * plateau
+        i0 = -1
+        i1 = -1
+        for r in range(nrow):
+            if sm[r] >= lvl:
+                if i0 < 0:
+                    i0 = r
+                i1 = r
+        has = i0 >= 0 and plateau > 0
+        if i0 < 0:
+            i0 = 0
+            i1 = nrow - 1
+        if i0 > 0:
+            a = sm[i0 - 1]
+            b = sm[i0]
+            first = i0 - 1 + ((lvl - a) / (b - a) if b != a else 1.0)
+        else:
+            first = 0.0
+        if i1 < nrow - 1:
+            a = sm[i1]
+            b = sm[i1 + 1]
+            last = i1 + ((a - lvl) / (a - b) if a != b else 0.0)
+        else:
+            last = nrow - 1.0
+        top_r = first + yk0
+        bot_r = last + yk0
+        # cross profile on the plateau rows
+        cos_t = 1.0 / math.sqrt(1.0 + slope[k] ** 2)
+        w_guess = band_width * cos_t - 2.0
+        if w_guess < 1.0:
+            w_guess = 1.0
+        lo_r = top_r + 0.5 * w_guess + 1.0
+        hi_r = bot_r - 0.5 * w_guess - 1.0
+        n_pr = math.floor(min(hi_r, y1[k] - 1.0)) - math.ceil(max(lo_r, float(yk0))) + 1
+        enough = n_pr >= 2
+        mid = 0.5 * (top_r + bot_r)
+        s_o = np.empty(np_)
+        s_v = np.empty(np_)
+        s_row = np.empty(np_, np.int64)
+        ns = 0
+        for i in range(np_):
+            gyf = float(yk0 + p_row[i])
+            if enough:
+                take = gyf >= lo_r and gyf <= hi_r
+            else:
+                take = abs(gyf - mid) <= 1.0
+            if take:
+                s_o[ns] = p_ob[i] * cos_t
+                s_v[ns] = p_val[i]
+                s_row[ns] = p_row[i]
+                ns += 1
+        # apparent width: three passes of the second moment, then the least-squares box
+        rw = band_width * cos_t
+        win = np.inf
+        cen_o = 0.0
+        cen = np.nan
+        w_app = np.nan
+        c0 = 0.0
+        for it in range(3):
+            c0 = 0.0
+            c1 = 0.0
+            c2 = 0.0
+            for i in range(ns):
+                o = s_o[i]
+                if it == 0 or abs(o - cen_o) <= win:
+                    v = s_v[i]
+                    vo = v * o
+                    c0 += v
+                    c1 += vo
+                    c2 += vo * o
+            cen = c1 / c0
+            var = c2 / c0 - cen * cen
+            t = var - 1.0 / 12.0 - sigma_min * sigma_min
+            if t < 0.0:
+                t = 0.0
+            w_app = math.sqrt(12.0 * t)
+            good = math.isfinite(w_app) and c0 > 0
+            wl = w_app if good else rw
+            wl = min(max(wl, 0.5 * rw - 1.0), rw + 2.0)
+            if good:
+                win = 0.5 * wl + 1.5
+                cen_o = cen
+        w_app = _refine_box_width(s_o, s_v, ns, cen, w_app, factors)
+        ok = has and c0 > 0 and ns >= 6 and math.isfinite(w_app) and w_app > 0
+        # goodness of the uniform model on the plateau rows
+        n_r = 0
+        last_row = -1
+        for i in range(ns):
+            if s_row[i] != last_row:
+                n_r += 1
+                last_row = s_row[i]
+        chi2 = np.inf
+        if ok:
+            amp = c0 / (max(n_r, 1) * w_app)
+            hw = 0.5 * w_app
+            ss = 0.0
+            for i in range(ns):
+                u = s_o[i] - cen
+                cov = min(u + 0.5, hw) - max(u - 0.5, -hw)
+                if cov < 0.0:
+                    cov = 0.0
+                res = s_v[i] - amp * cov
+                ss += res * res
+            chi2 = ss / (max(ns, 1) * noise2)
+            if not math.isfinite(chi2):
+                chi2 = np.inf
+        w_out[k] = w_app
+        top_out[k] = top_r
+        bot_out[k] = bot_r
+        plat_out[k] = plateau
+        chi2_out[k] = chi2
+        ok_out[k] = ok
+    return w_out, top_out, bot_out, plat_out, chi2_out, ok_out
+
+
+@_jit
+def _own(p_, c_, n_, tuple_mode, cur, has_cur, prev, has_prev, e_r, c_ref, has_contrast, labels, L, x, y, w, h,
+         x0, y0, y1):
+    K = L.size
+    total = 0
+    for k in range(K):
+        total += w[k] * h[k]
+    own_k = np.empty(total, np.int64)
+    own_y = np.empty(total, np.int64)
+    own_x = np.empty(total, np.int64)
+    xm = np.empty(K)
+    ym = np.empty(K)
+    slope = np.empty(K)
+    row_width = np.empty(K)
+    bg_dn = np.full(K, np.nan)
+    beta = np.full(K, np.nan)
+    n_all = 0
+    for k in range(K):
+        start = n_all
+        lab_k = L[k]
+        n_rows = 0
+        s0 = 0.0
+        sx = 0.0
+        sy = 0.0
+        s_bg = 0.0
+        sb = 0.0
+        sbb = 0.0
+        sd = 0.0
+        sbd = 0.0
+        vals = np.empty(w[k] * h[k])
+        for gy in range(y[k], y[k] + h[k]):
+            row_has = False
+            for gx in range(x[k], x[k] + w[k]):
+                if labels[gy, gx] != lab_k:
+                    continue
+                row_has = True
+                if tuple_mode:
+                    raw = np.float64(c_[gy, gx]) - 0.5 * (np.float64(p_[gy, gx]) + np.float64(n_[gy, gx]))
+                else:
+                    raw = np.float64(c_[gy, gx])
+                val = raw
+                if has_cur:
+                    cg = np.float64(cur[gy, gx])
+                    s_bg += cg - raw
+                    if has_contrast:
+                        d = e_r - (cg - raw)
+                        lim = 0.25 * c_ref
+                        val = raw * (c_ref / (d if d > lim else lim))
+                    if has_prev:
+                        b = np.float64(prev[gy, gx])
+                        dd = cg - b
+                        sb += b
+                        sbb += b * b
+                        sd += dd
+                        sbd += b * dd
+                vals[n_all - start] = val
+                own_k[n_all] = k
+                own_y[n_all] = gy
+                own_x[n_all] = gx
+                n_all += 1
+                wt = val if val > 0.0 else 0.0
+                s0 += wt
+                sx += wt * (gx - x0[k])
+                sy += wt * (gy - y0[k])
+            if row_has:
+                n_rows += 1
+        n_own = n_all - start
+        safe = s0 if s0 > 0 else 1.0
+        xm_l = sx / safe
+        ym_l = sy / safe
+        myy = 0.0
+        mxy = 0.0
+        for i in range(n_own):
+            wt = vals[i] if vals[i] > 0.0 else 0.0
+            dy = (own_y[start + i] - y0[k]) - ym_l
+            myy += wt * dy * dy
+            mxy += wt * ((own_x[start + i] - x0[k]) - xm_l) * dy
+        myy /= safe
+        mxy /= safe
+        if s0 > 0:
+            xm[k] = xm_l + x0[k]
+            ym[k] = ym_l + y0[k]
+            slope[k] = mxy / myy if myy > 1e-9 else 0.0
+        else:
+            xm[k] = x[k] + w[k] / 2.0
+            ym[k] = y[k] + h[k] / 2.0
+            slope[k] = 0.0
+        row_width[k] = n_own / max(n_rows, 1)
+        if has_cur:
+            bg_dn[k] = s_bg / n_own
+            if has_prev:
+                n = max(n_own, 1)
+                vb = sbb / n - (sb / n) ** 2
+                cov = sbd / n - sb * sd / n ** 2
+                if n_own >= 6 and vb >= 16.0:
+                    beta[k] = -cov / vb
+    return xm, ym, slope, row_width, bg_dn, beta, own_k[:n_all], own_y[:n_all], own_x[:n_all]
+
+
+def own_pixels(change, labels, L, x, y, w, h, x0, y0, y1, *, cur, prev, contrast):
+    """:func:`raingauge.gauge.streaks._own_streak_pixels`' per-streak quantities from its own
+    (detected) pixels: (xm, ym, slope, row_width, background_dn, beta, own_k, own_y, own_x)."""
+    p_, c_, n_, tuple_mode = _frames(change)
+    has_cur = cur is not None
+    has_prev = prev is not None
+    e_r, c_ref = (float(contrast[0]), float(contrast[1])) if contrast is not None else (0.0, 1.0)
+    return _own(p_, c_, n_, tuple_mode, np.ascontiguousarray(cur) if has_cur else _DUMMY, has_cur,
+                np.ascontiguousarray(prev) if has_prev else _DUMMY, has_prev, e_r, c_ref, contrast is not None,
+                np.ascontiguousarray(labels), _i64(L), _i64(x), _i64(y), _i64(w), _i64(h), _i64(x0), _i64(y0),
+                _i64(y1))
+
+
+def _frames(change):
+    if isinstance(change, tuple):
+        p_, c_, n_ = (np.ascontiguousarray(a) for a in change)
+        return p_, c_, n_, True
+    c_ = np.ascontiguousarray(change)
+    return c_, c_, c_, False
+
+
+def _i64(a):
+    return np.ascontiguousarray(a, dtype=np.int64)
+
+
+def _f64(a):
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+_DUMMY = np.zeros((1, 1), np.float32)
+
+
+def profile_pass(change, labels, valid, own, *, margin_px, sigma_min, cur, contrast, noise_sigma,
+                 baseline_width, factors, flank_gap, flank_min, flank_half_rows):
+    """The per-streak part of one pass of :func:`raingauge.gauge.streaks._profile_pass`:
+    returns (w', top, bottom (before the cap offset), plateau, chi2, ok), each (K,)."""
+    p_, c_, n_, tuple_mode = _frames(change)
+    has_cur = cur is not None
+    cur_a = np.ascontiguousarray(cur) if has_cur else _DUMMY
+    has_contrast = contrast is not None
+    e_r, c_ref = (float(contrast[0]), float(contrast[1])) if has_contrast else (0.0, 1.0)
+    K = own["L"].size
+    has_bw = baseline_width is not None
+    if has_bw:
+        bw = np.nan_to_num(np.asarray(baseline_width, dtype=np.float64), nan=0.0, posinf=0.0)
+        bw = np.clip(bw, 0.0, 4.0 * np.maximum(own["w"], 1) + 8.0)
+    else:
+        bw = np.zeros(K)
+
+    return _pass(p_, c_, n_, tuple_mode, cur_a, has_cur, e_r, c_ref, has_contrast, np.ascontiguousarray(labels),
+                 np.ascontiguousarray(valid, dtype=np.bool_), _i64(own["L"]), _i64(own["x"]), _i64(own["y"]),
+                 _i64(own["w"]), _i64(own["h"]), _i64(own["y0"]), _i64(own["y1"]), _i64(own["ch"]), _f64(own["xm"]),
+                 _f64(own["ym"]), _f64(own["slope"]), _f64(own["row_width"]), _f64(bw), has_bw, int(margin_px),
+                 float(sigma_min), float(noise_sigma), _f64(factors), float(flank_gap), float(flank_min),
+                 int(flank_half_rows))
