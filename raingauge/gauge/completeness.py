@@ -112,7 +112,7 @@ class CompletenessProbe:
         Parameters
         ----------
         shape : (int, int)
-        occupied : (M, N) bool array
+        occupied : (M, N) bool array, or anything that slices like one
         slope : float
             The rain's direction dx/dy in the image [-] (when ``drift_m_s`` is not given).
         drift_m_s : float, optional

@@ -430,6 +430,19 @@ class _SampleRing:
         return self._a[:self._n], self._b[:self._n]
 
 
+class _LabelMask:
+    """The bool image ``keep[labels]``, computed only where it is sliced (the probe looks
+    at a few small windows of the frame)."""
+
+    def __init__(self, labels: np.ndarray, keep: np.ndarray):
+        self.labels = labels
+        self.keep = keep
+        self.shape = labels.shape
+
+    def __getitem__(self, index):
+        return self.keep[self.labels[index]]
+
+
 class RainGauge:
     """A camera rain gauge on a stream of frames.
 
@@ -773,7 +786,8 @@ class RainGauge:
             # clear of the streaks already there (not of single noise pixels)
             long_ = stats[:, 3] >= 6
             long_[0] = False
-            self._run_probe((prev, cur, nxt), raws if u8 else None, long_[labels], slope, vol, t, ref_bg=ref_bg,
+            self._run_probe((prev, cur, nxt), raws if u8 else None, _LabelMask(labels, long_), slope, vol, t,
+                            ref_bg=ref_bg,
                             contrast=contrast, hist=entry[4], noise_dn=self._frame_noise_change / math.sqrt(1.5))
         if self.defocus_model != "uniform" or (self._brightness_known(MATURE_BRIGHTNESS_SAMPLES) and
                                                (self.probe is None or self.probe.mature)):
