@@ -686,11 +686,16 @@ class RainGauge:
         # a drop changes a pixel by a fraction beta < 0.1 of its contrast: large changes between
         # the neighbouring frames n-1 and n+1 over many pixels are scene or camera motion
         size = neighbour_change if neighbour_change.dtype.kind == "u" else np.abs(neighbour_change)
-        big = size >= self._motion_dn
-        if np.count_nonzero(big) / big.size > 0.005:
+        if size.dtype == np.uint8:
+            # (integer codes: >= the threshold is >= its ceiling)
+            thr = math.ceil(self._motion_dn)
+            n_big = cv2.countNonZero(cv2.compare(size, float(thr), cv2.CMP_GE)) if thr <= 255 else 0
+        else:
+            n_big = np.count_nonzero(size >= self._motion_dn)
+        if n_big / size.size > 0.005:
             flags.add("scene_motion")
         lap = cv2.Laplacian(cv2.GaussianBlur(cur[::2, ::2], (3, 3), 0), cv2.CV_32F)
-        sharp = float(np.mean(np.abs(lap)))
+        sharp = cv2.norm(lap, cv2.NORM_L1) / lap.size
         if len(self._sharpness) >= 10:
             ref = float(np.median(self._sharpness))
             if ref > 1.0 and sharp < 0.6 * ref:

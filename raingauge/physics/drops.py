@@ -164,7 +164,7 @@ def velocity_gunn_kinzer(diameter_m):
     d = np.asarray(diameter_m, dtype=float)
     lo, hi = FALL_VELOCITY_RANGES_M["gunn_kinzer"]
     inside = (d >= lo) & (d <= hi)
-    v = _GK_INTERP(np.clip(np.nan_to_num(d, nan=lo), lo, hi))
+    v = _GK_INTERP(np.where(inside, d, lo))
     return np.where(inside, v, np.nan)
 
 
