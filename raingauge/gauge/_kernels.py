@@ -23,7 +23,7 @@ except ImportError:  # pragma: no cover
     numba = None
     AVAILABLE = False
 
-__all__ = ["AVAILABLE", "own_pixels", "profile_pass"]
+__all__ = ["AVAILABLE", "own_pixels", "profile_pass", "warm_up"]
 
 
 def _jit(fn):
@@ -485,3 +485,27 @@ def profile_pass(change, labels, valid, own, *, margin_px, sigma_min, cur, contr
                  _f64(own["ym"]), _f64(own["slope"]), _f64(own["row_width"]), _f64(bw), has_bw, int(margin_px),
                  float(sigma_min), float(noise_sigma), _f64(factors), float(flank_gap), float(flank_min),
                  int(flank_half_rows))
+
+
+_WARM = False
+
+
+def warm_up() -> None:
+    """Compile the loops (or load them from numba's cache) for the gauge's inputs (float32
+    frames, 16- and 32-bit labels) now rather than on the first frames of a live camera;
+    once per process."""
+    global _WARM
+    if _WARM or not AVAILABLE:
+        return
+    from raingauge.gauge.streaks import measure_streak_table
+
+    rng = np.random.default_rng(0)
+    frames = [rng.normal(50.0, 2.0, (48, 32)).astype(np.float32) for _ in range(3)]
+    frames[1][8:40, 14:17] += 80.0
+    for dtype in (np.uint16, np.int32):
+        labels = np.zeros((48, 32), dtype)
+        labels[8:40, 14:17] = 1
+        stats = np.array([[0, 0, 0, 0, 0], [14, 8, 3, 32, 96]], np.int32)
+        measure_streak_table(tuple(frames), labels, stats, [1], cur=frames[1], prev=frames[0],
+                             contrast=(200.0, 150.0), engine="compiled")
+    _WARM = True

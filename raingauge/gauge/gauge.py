@@ -495,8 +495,12 @@ class RainGauge:
                  keep_drops: bool = False, defocus_model: str = "uniform",
                  overlap_correction: bool = True, volume: SampleVolume | None = None,
                  drop_brightness_dn: float | None = None, completeness_probe: bool = True):
+        from raingauge.gauge import _kernels
         from raingauge.physics.drops import FALL_VELOCITY_MODELS
 
+        # the measurement loops compiled before the first frame (a live camera's frames would
+        # wait for it)
+        _kernels.warm_up()
         if velocity_model not in FALL_VELOCITY_MODELS:
             raise ValueError(f"unknown velocity model {velocity_model!r}; valid: {list(FALL_VELOCITY_MODELS)}")
         if not (window_s > 0 and step_s > 0):
