@@ -62,8 +62,8 @@ def main(argv=None) -> int:
     for fr in warm:
         g.process(fr)
     g.flush()
-    print(f"# warm-up (compiling or loading the measurement loops): {time.process_time() - t0:.1f} s CPU "
-          f"(rendering it {t_render:.1f} s)")
+    print(f"# warm-up, a gauge on 40 frames (its sample volume built, the measurement loops compiled or "
+          f"loaded): {time.process_time() - t0:.1f} s CPU (rendering them {t_render:.1f} s)")
     del warm, g
     print(f"# gauge speed at {w}x{h}, one core (cv2 threads {cv2.getNumThreads()}), {args.frames} frames per clip, "
           f"CPU time")
