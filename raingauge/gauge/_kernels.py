@@ -118,7 +118,7 @@ def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, labels
           L, x, y, w, h, y0, y1, ch, xm, ym, slope, row_width, bw, has_bw, m, sigma_min,
           noise_sigma, factors, flank_gap, flank_min, flank_half_rows):
     K = L.size
-    M, N = labels.shape
+    N = labels.shape[1]
     w_out = np.full(K, np.nan)
     top_out = np.zeros(K)
     bot_out = np.zeros(K)
@@ -333,7 +333,7 @@ def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, labels
 
 @_jit
 def _own(p_, c_, n_, tuple_mode, cur, has_cur, prev, has_prev, e_r, c_ref, has_contrast, labels, L, x, y, w, h,
-         x0, y0, y1):
+         x0, y0):
     K = L.size
     total = 0
     for k in range(K):
@@ -430,7 +430,7 @@ def _own(p_, c_, n_, tuple_mode, cur, has_cur, prev, has_prev, e_r, c_ref, has_c
     return xm, ym, slope, row_width, bg_dn, beta, own_k[:n_all], own_y[:n_all], own_x[:n_all]
 
 
-def own_pixels(change, labels, L, x, y, w, h, x0, y0, y1, *, cur, prev, contrast):
+def own_pixels(change, labels, L, x, y, w, h, x0, y0, *, cur, prev, contrast):
     """:func:`raingauge.gauge.streaks._own_streak_pixels`' per-streak quantities from its own
     (detected) pixels: (xm, ym, slope, row_width, background_dn, beta, own_k, own_y, own_x)."""
     p_, c_, n_, tuple_mode = _frames(change)
@@ -439,8 +439,7 @@ def own_pixels(change, labels, L, x, y, w, h, x0, y0, y1, *, cur, prev, contrast
     e_r, c_ref = (float(contrast[0]), float(contrast[1])) if contrast is not None else (0.0, 1.0)
     return _own(p_, c_, n_, tuple_mode, np.ascontiguousarray(cur) if has_cur else _DUMMY, has_cur,
                 np.ascontiguousarray(prev) if has_prev else _DUMMY, has_prev, e_r, c_ref, contrast is not None,
-                np.ascontiguousarray(labels), _i64(L), _i64(x), _i64(y), _i64(w), _i64(h), _i64(x0), _i64(y0),
-                _i64(y1))
+                np.ascontiguousarray(labels), _i64(L), _i64(x), _i64(y), _i64(w), _i64(h), _i64(x0), _i64(y0))
 
 
 def _frames(change):

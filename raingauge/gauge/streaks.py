@@ -1686,7 +1686,7 @@ def _own_streak_pixels(change, labels, stats, L, *, margin_px, cur, prev, contra
     ch = y1 - y0
     if _use_compiled(engine):
         xm, ym, slope, row_width, bg_dn, beta, ko, oy, ox = _kernels.own_pixels(
-            change, labels, L, x, y, w, h, x0, y0, y1, cur=cur, prev=prev, contrast=contrast)
+            change, labels, L, x, y, w, h, x0, y0, cur=cur, prev=prev, contrast=contrast)
         return {"L": L, "x": x, "y": y, "w": w, "h": h, "y0": y0, "y1": y1, "ch": ch, "xm": xm, "ym": ym,
                 "slope": slope, "row_width": row_width, "background_dn": bg_dn, "beta": beta,
                 "own_k": ko, "own_y": oy, "own_x": ox}
