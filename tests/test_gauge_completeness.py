@@ -209,6 +209,43 @@ def test_probe_leaves_a_dark_uniform_scene_alone():
     assert np.all((ratio[live] > 0.8) & (ratio[live] < 1.2))
 
 
+def test_probe_slants_its_first_drops_with_the_wind():
+    """The first injections come before any drop is counted (the drops wait for the probe to
+    mature): in a cross wind they already drift at the speed the law-abiding streaks measure,
+    each slanted by drift / v(a) as the real drops are, the small ones most; not all at one
+    direction, which would slant the small drops too little and find them too easily."""
+    sim = pytest.importorskip("raingauge.render.simulator")
+    from raingauge.physics.drops import fall_velocity
+
+    cam = CAM.replace(noise_sigma_dn=1.0)
+    frames, truth = sim.render_clip(cam, seconds=8.0, rain_rate_mm_h=30.0, seed=3, background="uniform:40",
+                                    wind_m_s=3.0)
+    g = RainGauge(cam, window_s=8.0, step_s=8.0, velocity_model="gunn_kinzer")
+    first = []
+    plan = g.probe.plan
+
+    def spy(shape, occupied, slope, drift_m_s=None):
+        out = plan(shape, occupied, slope, drift_m_s=drift_m_s)
+        if not first and out and g.probe.injected == 0:
+            first.append((drift_m_s, out))
+        return out
+
+    g.probe.plan = spy
+    for fr in frames:
+        g.process(fr)
+        if first:
+            break
+    assert first, "the probe never ran before the first drop was counted"
+    drift, out = first[0]
+    assert drift == pytest.approx(3.0, rel=0.15)
+    for p in out:
+        slant = (p["p1"][0] - p["p0"][0]) / (p["p1"][1] - p["p0"][1])
+        v = float(fall_velocity(2 * p["radius_m"], model="gunn_kinzer"))
+        assert slant == pytest.approx(drift / v, rel=1e-6)
+    slants = [(p["p1"][0] - p["p0"][0]) / (p["p1"][1] - p["p0"][1]) for p in out]
+    assert max(slants) > 1.5 * min(slants)
+
+
 def test_probe_corrects_a_textured_scene():
     """Over a textured photograph streaks cross changing backgrounds and are detected in
     pieces the model of a locally uniform background does not foresee: without the probe

@@ -839,8 +839,15 @@ class RainGauge:
         prof = self.profile
         f = prof.focal_length_px
         e_r = self._drop_brightness()
-        # the drops drift with the wind: a slower (smaller) drop slants more
-        drift = float(np.median(self._drifts)) if len(self._drifts) >= 5 else None
+        # the drops drift with the wind: a slower (smaller) drop slants more.  The drift of
+        # the counted drops; until five were counted (the first injections come before any
+        # drop is counted: the drops wait for the probe), that of the law-abiding streaks
+        if len(self._drifts) >= 5:
+            drift = float(np.median(self._drifts))
+        elif len(self._law_drifts) >= 5 and abs(slope) >= 0.05:
+            drift = float(np.median(self._law_drifts))
+        else:
+            drift = None
         plan = probe.plan(prof.shape, occupied, slope, drift_m_s=drift)
         if not plan:
             return
