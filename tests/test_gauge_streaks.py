@@ -484,6 +484,31 @@ def test_compiled_streak_table_equals_the_array_form(background):
             np.testing.assert_array_equal(b[key], a[key])
 
 
+@pytest.mark.skipif(not __import__("raingauge.gauge._kernels", fromlist=["AVAILABLE"]).AVAILABLE,
+                    reason="numba not installed")
+def test_compiled_median_equals_numpy():
+    """The compiled loops' median (an insertion sort in place for short rows, np.sort
+    beyond) is np.median's for odd, even and long inputs, and sorts NaN last as np.sort."""
+    from raingauge.gauge import _kernels
+
+    rng = np.random.default_rng(4)
+    for n in (1, 2, 3, 7, 10, 64, 65, 200):
+        for ties in (False, True):
+            a = rng.normal(0.0, 5.0, n + 3)
+            if ties:
+                a = np.round(a)
+            expect = np.median(a[:n])
+            got = _kernels._median(a.copy(), n)
+            assert got == expect or (np.isnan(got) and np.isnan(expect)), (n, ties)
+    a = np.array([3.0, np.nan, 1.0, 2.0, np.nan, 0.5])
+    b = a.copy()
+    _kernels._sort_small(b, b.size)
+    np.testing.assert_array_equal(b, np.sort(a))
+    s4 = np.sort(a[:4])            # NaN sorted last, as by np.sort: the middle of the rest
+    assert _kernels._median(a.copy(), 4) == 0.5 * (s4[1] + s4[2])
+    assert math.isnan(_kernels._median(np.zeros(3), 0))
+
+
 def test_streak_table_engine_is_checked():
     from raingauge.gauge.streaks import measure_streak_table
 

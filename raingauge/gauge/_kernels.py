@@ -33,11 +33,30 @@ def _jit(fn):
 
 
 @_jit
+def _sort_small(a, n):
+    """Sort a[:n] in place by insertion, NaN last (the order of ``np.sort``)."""
+    for i in range(1, n):
+        v = a[i]
+        j = i - 1
+        if v != v:
+            continue
+        while j >= 0 and (a[j] != a[j] or a[j] > v):
+            a[j + 1] = a[j]
+            j -= 1
+        a[j + 1] = v
+
+
+@_jit
 def _median(a, n):
-    """Median of a[:n] (mean of the two middle values for even n; NaN for none)."""
+    """Median of a[:n] (mean of the two middle values for even n; NaN for none); a[:n]
+    is sorted in place when short."""
     if n == 0:
         return np.nan
-    s = np.sort(a[:n])
+    if n <= 64:
+        _sort_small(a, n)
+        s = a
+    else:
+        s = np.sort(a[:n])
     if n % 2 == 1:
         return s[(n - 1) // 2]
     return (s[n // 2 - 1] + s[n // 2]) / 2.0
@@ -69,10 +88,11 @@ def _box_gain(uu, vv, nk, hw):
 
 
 @_jit
-def _refine_box_width(o, v, n, cen, w0, factors):
+def _refine_box_width(o, v, n, cen, w0, factors, uu, vv, gain):
     """:func:`raingauge.gauge.streaks._refine_box_width` for one streak: least-squares
     width of a pixel-integrated box (height free) over the pixels at offsets o[:n] with
-    change v[:n], on the grid w0 * factors refined by a parabola in ln w."""
+    change v[:n], on the grid w0 * factors refined by a parabola in ln w; ``uu``, ``vv``
+    (at least n) and ``gain`` (factors' size) are scratch space."""
     good = math.isfinite(w0) and math.isfinite(cen) and w0 > 0
     if good:
         base = w0 if w0 > 0.6 else 0.6
@@ -82,8 +102,6 @@ def _refine_box_width(o, v, n, cen, w0, factors):
         c = 0.0
     nf = factors.size
     reach = 0.5 * base * factors[nf - 1] + 1.0
-    uu = np.empty(n)
-    vv = np.empty(n)
     nk = 0
     for i in range(n):
         u = abs(o[i] - c)
@@ -91,7 +109,6 @@ def _refine_box_width(o, v, n, cen, w0, factors):
             uu[nk] = u
             vv[nk] = v[i]
             nk += 1
-    gain = np.empty(nf)
     for j in range(nf):
         gain[j] = _box_gain(uu, vv, nk, 0.5 * base * factors[j])
     jbest = 0
@@ -126,6 +143,31 @@ def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, labels
     chi2_out = np.full(K, np.inf)
     ok_out = np.zeros(K, np.bool_)
     noise2 = max(noise_sigma, 1e-3) ** 2
+    # scratch space for the largest streak, shared by all
+    cap_max = 0
+    row_max = 0
+    for k in range(K):
+        mh = m + 2
+        if has_bw:
+            mh += int(math.ceil(0.5 * bw[k]))
+        cap_k = ch[k] * (min(x[k] + w[k] + mh, N) - max(x[k] - mh, 0))
+        cap_max = max(cap_max, cap_k)
+        row_max = max(row_max, ch[k])
+    p_row = np.empty(cap_max, np.int64)
+    p_ob = np.empty(cap_max)
+    p_val = np.empty(cap_max)
+    s_o = np.empty(cap_max)
+    s_v = np.empty(cap_max)
+    s_row = np.empty(cap_max, np.int64)
+    uu = np.empty(cap_max)
+    vv = np.empty(cap_max)
+    gain = np.empty(factors.size)
+    row_sum = np.empty(row_max)
+    f_sum = np.empty(row_max)
+    f_n = np.empty(row_max)
+    base = np.empty(row_max)
+    sm = np.empty(row_max)
+    buf = np.empty(row_max)
     for k in range(K):
         mh = m + 2
         band_width = row_width[k]
@@ -139,14 +181,11 @@ def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, labels
         nrow = ch[k]
         yk0 = y0[k]
         lab_k = L[k]
-        cap = nrow * (x1 - x0)
-        p_row = np.empty(cap, np.int64)
-        p_ob = np.empty(cap)
-        p_val = np.empty(cap)
         np_ = 0
-        row_sum = np.zeros(nrow)
-        f_sum = np.zeros(nrow)
-        f_n = np.zeros(nrow)
+        for r in range(nrow):
+            row_sum[r] = 0.0
+            f_sum[r] = 0.0
+            f_n[r] = 0.0
         flank_at = 0.5 * band_width + flank_gap
         for r in range(nrow):
             gy = yk0 + r
@@ -180,8 +219,8 @@ def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, labels
                     f_sum[r] += val
                     f_n[r] += 1.0
         if has_bw:
-            base = np.zeros(nrow)
             for r in range(nrow):
+                base[r] = 0.0
                 lo = max(r - flank_half_rows, 0)
                 hi = min(r + flank_half_rows, nrow - 1)
                 sv = 0.0
@@ -196,13 +235,11 @@ def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, labels
         for i in range(np_):
             row_sum[p_row[i]] += p_val[i]
         # 3-row smoothing, zero padded
-        sm = np.empty(nrow)
         for r in range(nrow):
             a = row_sum[r - 1] if r > 0 else 0.0
             b = row_sum[r + 1] if r + 1 < nrow else 0.0
             sm[r] = (a + row_sum[r] + b) / 3.0
         # plateau: median over the middle half of the streak's rows
-        buf = np.empty(nrow)
         nb = 0
         lo_y = y[k] + 0.25 * h[k]
         hi_y = y[k] + 0.75 * h[k]
@@ -252,9 +289,6 @@ def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, labels
         n_pr = math.floor(min(hi_r, y1[k] - 1.0)) - math.ceil(max(lo_r, float(yk0))) + 1
         enough = n_pr >= 2
         mid = 0.5 * (top_r + bot_r)
-        s_o = np.empty(np_)
-        s_v = np.empty(np_)
-        s_row = np.empty(np_, np.int64)
         ns = 0
         for i in range(np_):
             gyf = float(yk0 + p_row[i])
@@ -298,7 +332,7 @@ def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, labels
             if good:
                 win = 0.5 * wl + 1.5
                 cen_o = cen
-        w_app = _refine_box_width(s_o, s_v, ns, cen, w_app, factors)
+        w_app = _refine_box_width(s_o, s_v, ns, cen, w_app, factors, uu, vv, gain)
         ok = has and c0 > 0 and ns >= 6 and math.isfinite(w_app) and w_app > 0
         # goodness of the uniform model on the plateau rows
         n_r = 0
