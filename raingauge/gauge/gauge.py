@@ -553,6 +553,8 @@ class RainGauge:
         self._prev_counted: list = []                   # the drops of that frame
         self._gaps: deque = deque()                     # (t_before, t_after) of gaps in the frame times
         self._noise_log: deque = deque(maxlen=300)      # noise of the recent frames [gray levels]
+        self._n_noise = 0                               # frames logged in it
+        self._noise_median = (0, None)                  # (frames logged, median of the log) when last taken
         self._sharpness: deque = deque(maxlen=int(max(10 * profile.frame_rate_hz, 10)))
         self._brightness = _SampleRing(BRIGHTNESS_SAMPLES)   # (E_b, E_r estimate) of law-abiding streaks
         #: why measured streaks were not counted (diagnostics)
@@ -731,6 +733,7 @@ class RainGauge:
         noise = change_noise_dn(*raws) if u8 else change_noise_dn(prev, cur, nxt)   # (8 bits: the same)
         self._frame_noise_change = max(noise, self.noise_change)
         self._noise_log.append(self._frame_noise_change / math.sqrt(1.5))
+        self._n_noise += 1
         flags = self._frame_flags(raw, cur, neighbour_change, gap)
         slope = self._rain_slope()
         self._frame_slope = slope
@@ -1233,8 +1236,17 @@ class RainGauge:
         at the median noise of the recent frames, as a function of the drop contrast [gray
         levels] (None: the volume's nominal contrast), and a key of it."""
         vol = self.volume
-        noise = float(np.median(self._noise_log)) if self._noise_log else None
+        noise = self._median_noise()
         return (lambda c: vol.brightness_q_at(noise, c)), (id(vol), noise)
+
+    def _median_noise(self) -> float | None:
+        """The median noise of the recent frames [gray levels] (None before the first), taken
+        once per frame logged."""
+        if not self._noise_log:
+            return None
+        if self._noise_median[0] != self._n_noise:
+            self._noise_median = (self._n_noise, float(np.median(self._noise_log)))
+        return self._noise_median[1]
 
     def _drop_brightness(self) -> float:
         """The drop brightness E_r [gray levels] from the law-abiding streaks' samples
