@@ -509,6 +509,28 @@ def test_compiled_median_equals_numpy():
     assert math.isnan(_kernels._median(np.zeros(3), 0))
 
 
+@pytest.mark.parametrize("engine", ENGINES)
+def test_streak_table_reads_8bit_frames_as_their_float_image(engine):
+    """The 8-bit frames of a linear camera measure exactly as their float32 image does."""
+    from raingauge.gauge.streaks import measure_streak_table
+    from raingauge.render.simulator import render_clip
+
+    prof = CAM.replace(width_px=480, height_px=270)
+    frames, _ = render_clip(prof, n_frames=3, rain_rate_mm_h=50.0, seed=3, background="skimage:brick")
+    raw = [np.asarray(f, np.uint8) for f in frames]
+    lin = [f.astype(np.float32) for f in raw]
+    labels, stats = detect_streaks(np.minimum(lin[1] - lin[0], lin[1] - lin[2]), c=3.0)
+    sel = np.nonzero(stats[1:, 4] > 0)[0] + 1
+    assert sel.size >= 20
+    for contrast in (None, (200.0, 150.0)):
+        kw = dict(valid=stats[:, 4] > 0, contrast=contrast, noise_sigma=2.0, engine=engine)
+        a = measure_streak_table(tuple(lin), labels, stats, sel, cur=lin[1], prev=lin[0], **kw)
+        b = measure_streak_table(tuple(raw), labels, stats, sel, cur=raw[1], prev=raw[0], **kw)
+        assert a.keys() == b.keys()
+        for key in a:
+            np.testing.assert_array_equal(b[key], a[key], err_msg=key)
+
+
 def test_streak_table_engine_is_checked():
     from raingauge.gauge.streaks import measure_streak_table
 

@@ -525,8 +525,8 @@ _WARM = False
 
 def warm_up() -> None:
     """Compile the loops (or load them from numba's cache) for the gauge's inputs (float32
-    frames, 16- and 32-bit labels) now rather than on the first frames of a live camera;
-    once per process."""
+    frames, and the 8-bit frames of a linear camera; 16- and 32-bit labels) now rather than
+    on the first frames of a live camera; once per process."""
     global _WARM
     if _WARM or not AVAILABLE:
         return
@@ -535,10 +535,11 @@ def warm_up() -> None:
     rng = np.random.default_rng(0)
     frames = [rng.normal(50.0, 2.0, (48, 32)).astype(np.float32) for _ in range(3)]
     frames[1][8:40, 14:17] += 80.0
-    for dtype in (np.uint16, np.int32):
-        labels = np.zeros((48, 32), dtype)
-        labels[8:40, 14:17] = 1
-        stats = np.array([[0, 0, 0, 0, 0], [14, 8, 3, 32, 96]], np.int32)
-        measure_streak_table(tuple(frames), labels, stats, [1], cur=frames[1], prev=frames[0],
-                             contrast=(200.0, 150.0), engine="compiled")
+    for fr in (frames, [np.rint(f).astype(np.uint8) for f in frames]):
+        for dtype in (np.uint16, np.int32):
+            labels = np.zeros((48, 32), dtype)
+            labels[8:40, 14:17] = 1
+            stats = np.array([[0, 0, 0, 0, 0], [14, 8, 3, 32, 96]], np.int32)
+            measure_streak_table(tuple(fr), labels, stats, [1], cur=fr[1], prev=fr[0],
+                                 contrast=(200.0, 150.0), engine="compiled")
     _WARM = True

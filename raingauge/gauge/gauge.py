@@ -381,6 +381,21 @@ def drop_brightness_dn(samples_dn, background_dn, *, q_min: float = 0.6, q_ref: 
     return float(np.median(b)) + c
 
 
+def _mean_linear(frame: np.ndarray, step: int) -> float:
+    """``np.mean(frame[::step, ::step])`` of the frame as linear float32 intensities
+    (8-bit frames of a linear camera as ``frame.astype(np.float32)``) [gray levels].
+
+    Float32 sums of 8-bit values are exact while they stay below 2^24, in whatever order
+    they are taken: then the mean of the samples' float32 copy is that of the float32
+    frame's strided samples, to the bit."""
+    sub = frame[::step, ::step]
+    if sub.dtype == np.float32:
+        return float(np.mean(sub))
+    if sub.dtype == np.uint8 and sub.size * 255 < 2 ** 24:
+        return float(np.mean(sub.astype(np.float32)))
+    return float(np.mean(frame.astype(np.float32)[::step, ::step]))
+
+
 def _percentile_of_sorted(s: np.ndarray, lo: int, percentile: float) -> float:
     """``np.percentile(s[lo:], percentile)`` of an increasing array (the same linear
     interpolation, in the same arithmetic), without sorting again."""
@@ -572,6 +587,8 @@ class RainGauge:
         self._empty_scale = self._typical_drop_rate()
         # a linear camera: Eq. (19) on the 8-bit frames themselves, exactly, in int16
         self._linear_u8 = bool(profile.is_linear)
+        # (the pillbox model's measurement takes the change of float32 frames)
+        self._u8_direct = self._linear_u8 and defocus_model == "uniform"
         self._white_dn = float(profile.linearize(np.array([[255]], np.uint8))[0, 0])
 
     # ------------------------------------------------------------------ public
@@ -613,9 +630,14 @@ class RainGauge:
             self._gaps.append((self._t_in, t_s))
         self._t_in = t_s
         self._n_in += 1
-        lin = self.profile.linearize(frame)
-        if lin.dtype != np.float32:
-            lin = lin.astype(np.float32)
+        if self._u8_direct and frame.dtype == np.uint8:
+            # a linear camera's 8-bit codes are its linear intensities: the measurement reads
+            # them as they are, and a float32 image is made only of the parts used as one
+            lin = frame
+        else:
+            lin = self.profile.linearize(frame)
+            if lin.dtype != np.float32:
+                lin = lin.astype(np.float32)
         self._buffer.append((t_s, lin, frame if frame.dtype == np.uint8 else lin))
         out: list[dict] = []
         if len(self._buffer) == 3:
@@ -679,7 +701,7 @@ class RainGauge:
 
         flags = set()
         sub = raw[::4, ::4]
-        self._last_mean_bg = float(np.mean(cur[::4, ::4]))
+        self._last_mean_bg = _mean_linear(cur, 4)
         e_r = (self._drop_brightness() if self._brightness_known(10)
                else NOMINAL_DROP_BRIGHTNESS_DN)
         # a focused streak changes a pixel by ~5 % of the drop's contrast (beta ~ pi w / 4 L)
@@ -700,7 +722,9 @@ class RainGauge:
             n_big = np.count_nonzero(size >= self._motion_dn)
         if n_big / size.size > 0.005:
             flags.add("scene_motion")
-        lap = cv2.Laplacian(cv2.GaussianBlur(cur[::2, ::2], (3, 3), 0), cv2.CV_32F)
+        half = cur[::2, ::2]
+        lap = cv2.Laplacian(cv2.GaussianBlur(half if half.dtype == np.float32 else half.astype(np.float32), (3, 3), 0),
+                            cv2.CV_32F)
         sharp = cv2.norm(lap, cv2.NORM_L1) / lap.size
         if len(self._sharpness) >= 10:
             ref = float(np.median(self._sharpness))
@@ -713,13 +737,17 @@ class RainGauge:
 
     def _analyse(self, prev, cur, nxt, raw, t, gap, raws=None):
         prof = self.profile
-        if raws is not None and all(r.dtype == np.uint8 for r in raws):
+        u8 = raws is not None and all(r.dtype == np.uint8 for r in raws)
+        if not u8 and any(a.dtype == np.uint8 for a in (prev, cur, nxt)):
+            # 8-bit frames of a linear camera beside float ones: all as linear float32
+            prev, cur, nxt = (a.astype(np.float32) if a.dtype == np.uint8 else a for a in (prev, cur, nxt))
+        if u8:
             spike = spike_image(*raws)
         else:
             spike = spike_image(prev, cur, nxt)
-        # the change I_n - (I_{n-1} + I_{n+1}) / 2 is computed only where it is used
+        # the change I_n - (I_{n-1} + I_{n+1}) / 2 is computed only where it is used (the
+        # frames are 8-bit for a linear camera: the same numbers)
         change = (prev, cur, nxt)
-        u8 = raws is not None and all(r.dtype == np.uint8 for r in raws)
         if u8:
             import cv2
 
@@ -863,7 +891,7 @@ class RainGauge:
             r = int(math.ceil(p["radius_px"]))
             xa = int(round(min(p["p0"][0], p["p1"][0]))) - r
             xb = int(round(max(p["p0"][0], p["p1"][0]))) + r + 1
-            behind = frames[0][int(p["p0"][1]):int(p["p1"][1]) + 1, max(xa, 0):xb]
+            behind = frames[0][int(p["p0"][1]):int(p["p1"][1]) + 1, max(xa, 0):xb].astype(np.float32, copy=False)
             kap = float(vol.kappa(p["radius_m"], weights=weights, noise_dn=noise_dn, wind_m_s=wind))
             if behind.size and kap >= floor:
                 # p over the pixels behind the drop, averaged as kappa averages it over the

@@ -1595,13 +1595,14 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     ----------
     change : (M, N) float32 array, or (prev, cur, nxt)
         I_n - (I_{n-1} + I_{n+1}) / 2 [gray levels], or the three linearised frames
-        (the change is then computed only under the streaks).
+        (the change is then computed only under the streaks; float32, or the uint8 frames
+        of a linear camera, read as the same numbers).
     labels, stats : from :func:`detect_streaks`.
     select : (K,) int array
         Labels to measure.
     valid : (n + 1,) bool array, optional
         Which labels are streaks (masked out of each other's measurement).
-    cur, prev : (M, N) float32 arrays, optional
+    cur, prev : (M, N) float32 (or a linear camera's uint8) arrays, optional
         Frames n and n-1: mean background under each streak and the photometric slope of Eq. (18).
     contrast : (float, float), optional
         (E_r, C_ref): divide the change by the local contrast E_r - I_b and scale to C_ref
