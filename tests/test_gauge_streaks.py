@@ -531,6 +531,39 @@ def test_streak_table_reads_8bit_frames_as_their_float_image(engine):
             np.testing.assert_array_equal(b[key], a[key], err_msg=key)
 
 
+@pytest.mark.skipif(not __import__("raingauge.gauge._kernels", fromlist=["AVAILABLE"]).AVAILABLE,
+                    reason="numba not installed")
+def test_compiled_labelling_equals_opencv():
+    """The compiled labelling from a mask's runs (raingauge.gauge._kernels.label_components)
+    gives OpenCV's 8-connected labels, their numbering, label type and stats, on random masks
+    of any shape and density (rows of a ragged last 8-pixel word included), an empty one and
+    a dense one past 65000 pixels (32-bit labels)."""
+    import cv2
+
+    from raingauge.gauge import _kernels
+
+    def opencv(mask):
+        ltype = cv2.CV_16U if cv2.countNonZero(mask) < 65000 else cv2.CV_32S
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8, ltype=ltype)
+        stats = stats[:, :5].copy()
+        stats[0] = 0
+        return n, labels, stats
+
+    rng = np.random.default_rng(11)
+    masks = [np.zeros((30, 40), np.uint8), ((rng.random((400, 400)) < 0.6) * 255).astype(np.uint8)]
+    for _ in range(150):
+        shape = (int(rng.integers(1, 50)), int(rng.integers(1, 70)))
+        masks.append(((rng.random(shape) < rng.uniform(0.01, 0.7)) * 255).astype(np.uint8))
+    for mask in masks:
+        n, labels, stats = opencv(mask)
+        n2, labels2, stats2 = _kernels.label_components(mask)
+        assert n2 == n
+        assert labels2.dtype == labels.dtype
+        np.testing.assert_array_equal(labels2, labels)
+        np.testing.assert_array_equal(stats2, stats)
+    assert masks[1].sum() // 255 >= 65000 and _kernels.label_components(masks[1])[1].dtype == np.int32
+
+
 def test_streak_table_engine_is_checked():
     from raingauge.gauge.streaks import measure_streak_table
 

@@ -23,7 +23,7 @@ except ImportError:  # pragma: no cover
     numba = None
     AVAILABLE = False
 
-__all__ = ["AVAILABLE", "own_pixels", "profile_pass", "warm_up"]
+__all__ = ["AVAILABLE", "label_components", "own_pixels", "profile_pass", "warm_up"]
 
 
 def _jit(fn):
@@ -520,6 +520,175 @@ def profile_pass(change, labels, valid, own, *, margin_px, sigma_min, cur, contr
                  int(flank_half_rows))
 
 
+@_jit
+def _runs(mask, words, use_words):
+    """The runs of nonzero pixels of ``mask`` row by row: (row start index (M + 1,), first
+    column, last column (inclusive)) of each run, in raster order.  Zero 8-pixel words of
+    ``words`` (the mask's rows as uint64, when ``use_words``) are skipped whole."""
+    M, N = mask.shape
+    # (room for the most runs a mask can hold: untouched memory costs nothing, and arrays
+    # not rebound in the loop keep it free of reference counting)
+    cap = M * ((N + 1) // 2)
+    xs = np.empty(cap, np.int64)
+    xe = np.empty(cap, np.int64)
+    row_ptr = np.empty(M + 1, np.int64)
+    n = 0
+    nw = N // 8 if use_words else 0
+    for y in range(M):
+        row_ptr[y] = n
+        start = -1
+        for wi in range(nw):
+            if words[y, wi] == 0:
+                if start >= 0:
+                    xs[n] = start
+                    xe[n] = 8 * wi - 1
+                    n += 1
+                    start = -1
+                continue
+            for x in range(8 * wi, 8 * wi + 8):
+                if mask[y, x] != 0:
+                    if start < 0:
+                        start = x
+                elif start >= 0:
+                    xs[n] = start
+                    xe[n] = x - 1
+                    n += 1
+                    start = -1
+        for x in range(8 * nw, N):
+            if mask[y, x] != 0:
+                if start < 0:
+                    start = x
+            elif start >= 0:
+                xs[n] = start
+                xe[n] = x - 1
+                n += 1
+                start = -1
+        if start >= 0:
+            xs[n] = start
+            xe[n] = N - 1
+            n += 1
+    row_ptr[M] = n
+    return row_ptr, xs[:n].copy(), xe[:n].copy()
+
+
+@_jit
+def _find(parent, i):
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@_jit
+def _run_components(row_ptr, xs, xe):
+    """8-connected components of the runs of :func:`_runs`, numbered as OpenCV's block-based
+    labelling (``cv2.connectedComponentsWithStats``, 8-connectivity) numbers them: by the
+    first 2 x 2 block (in raster order of the blocks) holding a pixel of each.  Returns the
+    label of each run and the stats (n + 1, 5) int32: x, y, width, height, area (row 0, the
+    background, all 0)."""
+    M = row_ptr.size - 1
+    n = xs.size
+    parent = np.arange(n)
+    for y in range(1, M):
+        j = row_ptr[y - 1]
+        j_end = row_ptr[y]
+        for i in range(row_ptr[y], row_ptr[y + 1]):
+            # runs of the row above touching this one (8-connectivity: one column beyond)
+            while j < j_end and xe[j] < xs[i] - 1:
+                j += 1
+            k = j
+            while k < j_end and xs[k] <= xe[i] + 1:
+                ri = _find(parent, i)
+                rk = _find(parent, k)
+                if ri != rk:
+                    if ri < rk:
+                        parent[rk] = ri
+                    else:
+                        parent[ri] = rk
+                k += 1
+    # each component's first block: the least (y // 2, x // 2) of its runs
+    width = 0
+    for i in range(n):
+        if xe[i] + 1 > width:
+            width = xe[i] + 1
+    bw = width // 2 + 1
+    key = np.full(n, np.iinfo(np.int64).max)
+    for y in range(M):
+        for i in range(row_ptr[y], row_ptr[y + 1]):
+            r = _find(parent, i)
+            kk = (y // 2) * bw + xs[i] // 2
+            if kk < key[r]:
+                key[r] = kk
+    roots = np.empty(n, np.int64)
+    n_comp = 0
+    for i in range(n):
+        if parent[i] == i:
+            roots[n_comp] = i
+            n_comp += 1
+    roots = roots[:n_comp]
+    order = np.argsort(key[roots])
+    comp_label = np.zeros(n, np.int64)
+    for c in range(n_comp):
+        comp_label[roots[order[c]]] = c + 1
+    run_label = np.empty(n, np.int64)
+    x0 = np.full(n_comp + 1, np.iinfo(np.int64).max)
+    y0 = np.full(n_comp + 1, np.iinfo(np.int64).max)
+    x1 = np.full(n_comp + 1, -1)
+    y1 = np.full(n_comp + 1, -1)
+    area = np.zeros(n_comp + 1, np.int64)
+    for y in range(M):
+        for i in range(row_ptr[y], row_ptr[y + 1]):
+            lab = comp_label[_find(parent, i)]
+            run_label[i] = lab
+            x0[lab] = min(x0[lab], xs[i])
+            x1[lab] = max(x1[lab], xe[i])
+            y0[lab] = min(y0[lab], y)
+            y1[lab] = max(y1[lab], y)
+            area[lab] += xe[i] - xs[i] + 1
+    stats = np.zeros((n_comp + 1, 5), np.int32)
+    for c in range(1, n_comp + 1):
+        stats[c, 0] = x0[c]
+        stats[c, 1] = y0[c]
+        stats[c, 2] = x1[c] - x0[c] + 1
+        stats[c, 3] = y1[c] - y0[c] + 1
+        stats[c, 4] = area[c]
+    return run_label, stats
+
+
+@_jit
+def _paint_runs(labels, row_ptr, xs, xe, run_label):
+    """Write each run's label into ``labels`` (zero elsewhere, as given)."""
+    M = row_ptr.size - 1
+    for y in range(M):
+        for i in range(row_ptr[y], row_ptr[y + 1]):
+            lab = run_label[i]
+            for x in range(xs[i], xe[i] + 1):
+                labels[y, x] = lab
+
+
+def label_components(mask):
+    """``cv2.connectedComponentsWithStats(mask, connectivity=8, ltype=...)`` for a sparse
+    mask, from its runs: (n, labels, stats), the labels uint16 while the mask has fewer than
+    65000 pixels (else int32), numbered as OpenCV numbers them; the stats' row 0 (the
+    background) is 0 and only their first five columns are given.
+
+    Parameters
+    ----------
+    mask : (M, N) uint8 array
+        Nonzero where a pixel is set.
+    """
+    mask = np.ascontiguousarray(mask, dtype=np.uint8)
+    M, N = mask.shape
+    use_words = N >= 8 and N % 8 == 0
+    words = mask.view(np.uint64) if use_words else np.zeros((1, 1), np.uint64)
+    row_ptr, xs, xe = _runs(mask, words, use_words)
+    run_label, stats = _run_components(row_ptr, xs, xe)
+    n_px = int(stats[:, 4].sum())
+    labels = np.zeros((M, N), np.uint16 if n_px < 65000 else np.int32)
+    _paint_runs(labels, row_ptr, xs, xe, run_label)
+    return stats.shape[0], labels, stats
+
+
 _WARM = False
 
 
@@ -542,4 +711,12 @@ def warm_up() -> None:
             stats = np.array([[0, 0, 0, 0, 0], [14, 8, 3, 32, 96]], np.int32)
             measure_streak_table(tuple(fr), labels, stats, [1], cur=fr[1], prev=fr[0],
                                  contrast=(200.0, 150.0), engine="compiled")
+    # the labelling, into 16- and 32-bit labels, of masks with and without a ragged last word
+    for width in (32, 30):
+        mask = np.zeros((48, width), np.uint8)
+        mask[8:40, 14:17] = 255
+        label_components(mask)
+    row_ptr, xs, xe = _runs(mask, np.zeros((1, 1), np.uint64), False)
+    run_label = _run_components(row_ptr, xs, xe)[0]
+    _paint_runs(np.zeros(mask.shape, np.int32), row_ptr, xs, xe, run_label)
     _WARM = True
