@@ -370,8 +370,13 @@ def _own(p_, c_, n_, tuple_mode, cur, has_cur, prev, has_prev, e_r, c_ref, has_c
          x0, y0):
     K = L.size
     total = 0
+    biggest = 0
     for k in range(K):
         total += w[k] * h[k]
+        biggest = max(biggest, w[k] * h[k])
+    # (one scratch array for all streaks: an array allocated in the loop would be
+    # reference-counted in the inner loops)
+    vals = np.empty(biggest)
     own_k = np.empty(total, np.int64)
     own_y = np.empty(total, np.int64)
     own_x = np.empty(total, np.int64)
@@ -394,7 +399,6 @@ def _own(p_, c_, n_, tuple_mode, cur, has_cur, prev, has_prev, e_r, c_ref, has_c
         sbb = 0.0
         sd = 0.0
         sbd = 0.0
-        vals = np.empty(w[k] * h[k])
         for gy in range(y[k], y[k] + h[k]):
             row_has = False
             for gx in range(x[k], x[k] + w[k]):
