@@ -564,6 +564,31 @@ def test_compiled_labelling_equals_opencv():
     assert masks[1].sum() // 255 >= 65000 and _kernels.label_components(masks[1])[1].dtype == np.int32
 
 
+def test_detection_from_8bit_frames_equals_that_of_their_spike_image():
+    """detect_streaks on the three 8-bit frames (one compiled pass summing Eq. (19) along the
+    fall, where numba is installed) labels exactly as on their int16 spike image, with and
+    without hysteresis, for odd and even smoothing lengths and thresholds off the integers;
+    slanted rain falls back to the spike image."""
+    from raingauge.gauge.streaks import spike_image
+    from raingauge.render.simulator import render_clip
+
+    prof = CAM.replace(width_px=480, height_px=270)
+    frames, _ = render_clip(prof, n_frames=3, rain_rate_mm_h=50.0, seed=5, background="skimage:brick")
+    trio = tuple(np.asarray(f, np.uint8) for f in frames)
+    rng = np.random.default_rng(8)
+    noise = tuple(rng.integers(0, 256, (23, 17)).astype(np.uint8) for _ in range(3))
+    for three in (trio, noise):
+        spike = spike_image(*three)
+        for c, grow, n_s, slope in ((3.0, 1.0, 5, 0.0), (2.7, 0.6, 5, 0.0), (3.3, 0.5, 4, 0.0), (2.0, 1.0, 7, 0.0),
+                                    (3.0, 1.0, 5, 0.2)):
+            a = detect_streaks(spike, c=c, grow=grow, smooth_px=n_s, slope=slope)
+            b = detect_streaks(three, c=c, grow=grow, smooth_px=n_s, slope=slope)
+            assert b[0].dtype == a[0].dtype
+            np.testing.assert_array_equal(b[0], a[0])
+            np.testing.assert_array_equal(b[1], a[1])
+    assert np.count_nonzero(detect_streaks(trio, c=3.0)[1][:, 4] > 0) >= 20
+
+
 def test_streak_table_engine_is_checked():
     from raingauge.gauge.streaks import measure_streak_table
 

@@ -23,7 +23,7 @@ except ImportError:  # pragma: no cover
     numba = None
     AVAILABLE = False
 
-__all__ = ["AVAILABLE", "label_components", "own_pixels", "profile_pass", "warm_up"]
+__all__ = ["AVAILABLE", "label_components", "own_pixels", "profile_pass", "spike_masks", "warm_up"]
 
 
 def _jit(fn):
@@ -693,6 +693,58 @@ def label_components(mask):
     return stats.shape[0], labels, stats
 
 
+@_jit
+def _spike_masks(prev, cur, nxt, n_s, thr, thr_low, has_low, mask, low):
+    """Eq. (19) summed over ``n_s`` rows along the fall, from the 8-bit frames of a linear
+    camera: mask = 255 where sum min(I_n - I_{n-1}, I_n - I_{n+1}) >= thr (and low where it
+    is >= thr_low), the sum centred on the row (its first n_s // 2 and last n_s - 1 - n_s // 2
+    rows, where no window is whole, summing to 0).  Integer sums, exact."""
+    M, N = cur.shape
+    half = n_s // 2
+    ring = np.zeros((n_s, N), np.int64)
+    acc = np.zeros(N, np.int64)
+    zero_hi = 255 if 0 >= thr else 0
+    zero_lo = 255 if 0 >= thr_low else 0
+    for y in range(half):
+        for x in range(N):
+            mask[y, x] = zero_hi
+            if has_low:
+                low[y, x] = zero_lo
+    for y in range(M - (n_s - 1 - half), M):
+        for x in range(N):
+            mask[y, x] = zero_hi
+            if has_low:
+                low[y, x] = zero_lo
+    for r in range(M):
+        slot = r % n_s
+        out = r - (n_s - 1) + half
+        for x in range(N):
+            a = np.int64(prev[r, x])
+            b = np.int64(nxt[r, x])
+            v = np.int64(cur[r, x]) - (a if a > b else b)
+            t = acc[x] + v - ring[slot, x]
+            ring[slot, x] = v
+            acc[x] = t
+            if r >= n_s - 1:
+                mask[out, x] = 255 if t >= thr else 0
+                if has_low:
+                    low[out, x] = 255 if t >= thr_low else 0
+
+
+def spike_masks(prev, cur, nxt, smooth_px, threshold, threshold_low=None):
+    """The detection masks of :func:`raingauge.gauge.streaks.detect_streaks` straight from
+    the 8-bit frames n-1, n, n+1 of a linear camera: (mask, low) uint8 (0 or 255), the spike
+    image of Eq. (19) summed over ``smooth_px`` rows compared with ``threshold`` (and
+    ``threshold_low``; low is None without it)."""
+    prev, cur, nxt = (np.ascontiguousarray(a, dtype=np.uint8) for a in (prev, cur, nxt))
+    mask = np.empty(cur.shape, np.uint8)
+    has_low = threshold_low is not None
+    low = np.empty(cur.shape, np.uint8) if has_low else np.empty((1, 1), np.uint8)
+    _spike_masks(prev, cur, nxt, int(smooth_px), float(threshold), float(threshold_low) if has_low else 0.0,
+                 has_low, mask, low)
+    return mask, (low if has_low else None)
+
+
 _WARM = False
 
 
@@ -715,6 +767,9 @@ def warm_up() -> None:
             stats = np.array([[0, 0, 0, 0, 0], [14, 8, 3, 32, 96]], np.int32)
             measure_streak_table(tuple(fr), labels, stats, [1], cur=fr[1], prev=fr[0],
                                  contrast=(200.0, 150.0), engine="compiled")
+    # the detection masks of 8-bit frames
+    spike_masks(*[np.rint(f).astype(np.uint8) for f in frames], 5, 15.0, 7.5)
+    spike_masks(*[np.rint(f).astype(np.uint8) for f in frames], 5, 15.0)
     # the labelling, into 16- and 32-bit labels, of masks with and without a ragged last word
     for width in (32, 30):
         mask = np.zeros((48, width), np.uint8)

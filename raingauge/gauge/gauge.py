@@ -741,10 +741,8 @@ class RainGauge:
         if not u8 and any(a.dtype == np.uint8 for a in (prev, cur, nxt)):
             # 8-bit frames of a linear camera beside float ones: all as linear float32
             prev, cur, nxt = (a.astype(np.float32) if a.dtype == np.uint8 else a for a in (prev, cur, nxt))
-        if u8:
-            spike = spike_image(*raws)
-        else:
-            spike = spike_image(prev, cur, nxt)
+        # (8-bit frames: the spike image is summed along the fall as it is taken)
+        spike = tuple(raws) if u8 else spike_image(prev, cur, nxt)
         # the change I_n - (I_{n-1} + I_{n+1}) / 2 is computed only where it is used (the
         # frames are 8-bit for a linear camera: the same numbers)
         change = (prev, cur, nxt)
@@ -877,7 +875,7 @@ class RainGauge:
             return
         lin, raw, centres = probe.canvas(frames, plan, min(e_r, self._white_dn), raws=raws,
                                          delinearize=prof.delinearize)
-        spike = spike_image(*raw) if raw is not None else spike_image(*lin)
+        spike = tuple(raw) if raw is not None else spike_image(*lin)
         lab_c, st_c = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope, grow=vol.grow)
         weights = self.volume.histogram_weights(hist, min(e_r, self._white_dn))
         wind = self._wind_m_s()

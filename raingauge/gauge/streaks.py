@@ -677,8 +677,11 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
 
     Parameters
     ----------
-    spike : (M, N) float32 array
-        min(I_n - I_{n-1}, I_n - I_{n+1}) [gray levels] (see :func:`change_images`).
+    spike : (M, N) float32 array, or (prev, cur, nxt)
+        min(I_n - I_{n-1}, I_n - I_{n+1}) [gray levels] (see :func:`change_images`),
+        or the three frames it is taken of (:func:`spike_image`; the 8-bit frames of a
+        linear camera are then summed along the fall in one compiled pass, the same
+        integers).
     c : float
         Detection threshold [gray levels] (the profile's ``detection_threshold_dn``).
     smooth_px : int
@@ -717,6 +720,16 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
 
     if not (c > 0 and math.isfinite(c)):
         raise ValueError(f"detection threshold c must be a positive number of gray levels, got {c!r}")
+    if isinstance(spike, tuple):
+        n_s = int(smooth_px)
+        if (_kernels.AVAILABLE and abs(slope) < 0.05 and 1 < n_s <= 64 and spike[1].shape[0] > n_s
+                and all(f.dtype == np.uint8 for f in spike)):
+            # the same integer sums in one compiled pass over the three frames
+            mask, low = _kernels.spike_masks(*spike, n_s, float(c) * n_s,
+                                             float(c * grow) * n_s if grow < 1.0 else None)
+            return _label_and_merge(mask, low, min_pixels=min_pixels, merge_gap_px=merge_gap_px, slope=slope,
+                                    grow_rows=grow_rows)
+        spike = spike_image(*spike)
     if spike.dtype == np.int16 and abs(slope) < 0.05 and 0 < smooth_px <= 64:
         # exact integer box sum (|spike| <= 255): compare the sum with n c
         n_s = max(int(smooth_px), 1)
@@ -744,6 +757,15 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
             s = cv2.filter2D(spike, -1, fall_kernel(int(smooth_px), slope), borderType=cv2.BORDER_REFLECT)
         mask = cv2.compare(s, float(c), cv2.CMP_GE)
         low = cv2.compare(s, float(c * grow), cv2.CMP_GE) if grow < 1.0 else None
+    return _label_and_merge(mask, low, min_pixels=min_pixels, merge_gap_px=merge_gap_px, slope=slope,
+                            grow_rows=grow_rows)
+
+
+def _label_and_merge(mask, low, *, min_pixels, merge_gap_px, slope, grow_rows):
+    """:func:`detect_streaks` from its masks on: the hysteresis growth (with ``low``), the
+    labelling, the small components' area set to 0, and the merge of collinear pieces."""
+    import cv2
+
     if low is not None:
         reach = cv2.dilate(mask, np.ones((2 * int(grow_rows) + 1, 1), np.uint8))
         mask = cv2.bitwise_or(mask, cv2.bitwise_and(low, reach))
