@@ -23,7 +23,7 @@ except ImportError:  # pragma: no cover
     numba = None
     AVAILABLE = False
 
-__all__ = ["AVAILABLE", "label_components", "own_pixels", "profile_pass", "spike_masks", "warm_up"]
+__all__ = ["AVAILABLE", "label_components", "own_pixels", "profile_pass", "spike_masks", "change_histogram", "warm_up"]
 
 
 def _jit(fn):
@@ -745,6 +745,24 @@ def spike_masks(prev, cur, nxt, smooth_px, threshold, threshold_low=None):
     return mask, (low if has_low else None)
 
 
+@_jit
+def _change_hist(prev, cur, nxt, row_step, col_step, hist):
+    M, N = cur.shape
+    for y in range(0, M, row_step):
+        for x in range(0, N, col_step):
+            hist[2 * np.int64(cur[y, x]) - np.int64(prev[y, x]) - np.int64(nxt[y, x]) + 510] += 1
+
+
+def change_histogram(prev, cur, nxt, row_step, col_step):
+    """Histogram of 2 I_n - I_{n-1} - I_{n+1} + 510 over every ``row_step``-th row and
+    ``col_step``-th column of 8-bit frames: (1021,) int64 counts (as ``np.bincount`` of
+    those samples)."""
+    hist = np.zeros(1021, np.int64)
+    _change_hist(np.ascontiguousarray(prev, dtype=np.uint8), np.ascontiguousarray(cur, dtype=np.uint8),
+                 np.ascontiguousarray(nxt, dtype=np.uint8), int(row_step), int(col_step), hist)
+    return hist
+
+
 _WARM = False
 
 
@@ -767,7 +785,8 @@ def warm_up() -> None:
             stats = np.array([[0, 0, 0, 0, 0], [14, 8, 3, 32, 96]], np.int32)
             measure_streak_table(tuple(fr), labels, stats, [1], cur=fr[1], prev=fr[0],
                                  contrast=(200.0, 150.0), engine="compiled")
-    # the detection masks of 8-bit frames
+    # the noise histogram and the detection masks of 8-bit frames
+    change_histogram(*[np.rint(f).astype(np.uint8) for f in frames], 3, 4)
     spike_masks(*[np.rint(f).astype(np.uint8) for f in frames], 5, 15.0, 7.5)
     spike_masks(*[np.rint(f).astype(np.uint8) for f in frames], 5, 15.0)
     # the labelling, into 16- and 32-bit labels, of masks with and without a ragged last word
