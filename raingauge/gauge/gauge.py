@@ -1188,10 +1188,11 @@ class RainGauge:
         wind = self._wind_m_s()
         if prepared:
             self._prune_tracks(prepared[0]["t"])
-        for c in prepared:
+        qs = self._photometric_qs(prepared, e_r)
+        for c, q in zip(prepared, qs):
             t, w_app, mot, dx, xc, yc = c["t"], c["w_app"], c["mot"], c["dx"], c["xc"], c["yc"]
             vol = c.get("vol", self.volume)
-            a = self._drop_radius(c, e_r, vol)
+            a = self._drop_radius(c, e_r, vol, q=q)
             if a is None:
                 rejected += 1
                 self.rejections["defocus_photometric"] += 1
@@ -1228,10 +1229,26 @@ class RainGauge:
             counted.append(d)
         return counted, rejected
 
-    def _drop_radius(self, c: dict, e_r: float, vol) -> float | None:
+    def _photometric_qs(self, prepared: list, e_r: float) -> list:
+        """The photometric focus q of Eq. (18) of each candidate of ``prepared`` with a
+        photometric measurement, at once (:func:`photometric_focus` is elementwise: the same
+        numbers one by one); None for the others and without a drop brightness."""
+        idx = [i for i, c in enumerate(prepared) if c["photo"] is not None]
+        qs = [None] * len(prepared)
+        if not idx or not np.isfinite(e_r):
+            return qs
+        ib = np.array([prepared[i]["photo"][0] for i in idx], dtype=float)
+        total = np.array([prepared[i]["photo"][1] for i in idx], dtype=float)
+        w_app = np.array([prepared[i]["w_app"] for i in idx], dtype=float)
+        for i, q in zip(idx, photometric_focus(total, w_app, e_r - ib).tolist()):
+            qs[i] = q
+        return qs
+
+    def _drop_radius(self, c: dict, e_r: float, vol, q: float | None = None) -> float | None:
         """The radius a [m] of a measured streak ``c``: the photometric focus q of Eq. (18)
         takes the blur out of its width, and the depth its size is typically seen at sets
-        the scale; None when q fails the defocus test."""
+        the scale; None when q fails the defocus test.  ``q``: the focus when already taken
+        (:meth:`_photometric_qs`)."""
         prof = self.profile
         f = prof.focal_length_px
         z0 = prof.focus_distance_m
@@ -1239,7 +1256,8 @@ class RainGauge:
         if c["photo"] is None:
             return float(vol.true_radius_m(w_app * z0 / (2 * f)))
         ib, total = c["photo"]
-        q = float(photometric_focus(total, w_app, e_r - ib)) if np.isfinite(e_r) else 1.0
+        if q is None:
+            q = float(photometric_focus(total, w_app, e_r - ib)) if np.isfinite(e_r) else 1.0
         if not q >= vol.q_min:
             return None
         w_true = w_app * math.sqrt(min(q, 1.0))
