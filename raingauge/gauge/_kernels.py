@@ -23,7 +23,7 @@ except ImportError:  # pragma: no cover
     numba = None
     AVAILABLE = False
 
-__all__ = ["AVAILABLE", "label_components", "own_pixels", "profile_pass", "spike_masks", "change_histogram", "warm_up"]
+__all__ = ["AVAILABLE", "label_components", "own_pixels", "profile_pass", "spike_masks", "change_histogram", "union_roots", "warm_up"]
 
 
 def _jit(fn):
@@ -753,6 +753,12 @@ def _change_hist(prev, cur, nxt, row_step, col_step, hist):
             hist[2 * np.int64(cur[y, x]) - np.int64(prev[y, x]) - np.int64(nxt[y, x]) + 510] += 1
 
 
+def union_roots(n_nodes, first, second):
+    """Groups of the pairs (first[i], second[i]) of nodes < ``n_nodes``, joined in order (each
+    pair's second set under its first's root): (members, root of each)."""
+    return _union_roots(int(n_nodes), _i64(first), _i64(second))
+
+
 def change_histogram(prev, cur, nxt, row_step, col_step):
     """Histogram of 2 I_n - I_{n-1} - I_{n+1} + 510 over every ``row_step``-th row and
     ``col_step``-th column of 8-bit frames: (1021,) int64 counts (as ``np.bincount`` of
@@ -761,6 +767,30 @@ def change_histogram(prev, cur, nxt, row_step, col_step):
     _change_hist(np.ascontiguousarray(prev, dtype=np.uint8), np.ascontiguousarray(cur, dtype=np.uint8),
                  np.ascontiguousarray(nxt, dtype=np.uint8), int(row_step), int(col_step), hist)
     return hist
+
+
+@_jit
+def _union_roots(n_nodes, first, second):
+    """Union-find over the pairs (first[i], second[i]) taken in order, the root of the second's
+    set put under the root of the first's: (members, their roots), the members in the order
+    they first appear in the pairs (first, then second, of each pair)."""
+    parent = np.full(n_nodes, -1, np.int64)
+    members = np.empty(2 * first.size, np.int64)
+    n_mem = 0
+    for i in range(first.size):
+        for node in (first[i], second[i]):
+            if parent[node] < 0:
+                parent[node] = node
+                members[n_mem] = node
+                n_mem += 1
+        rb = _find(parent, second[i])
+        ra = _find(parent, first[i])
+        parent[rb] = ra
+    members = members[:n_mem]
+    roots = np.empty(n_mem, np.int64)
+    for j in range(n_mem):
+        roots[j] = _find(parent, members[j])
+    return members, roots
 
 
 _WARM = False
@@ -785,6 +815,7 @@ def warm_up() -> None:
             stats = np.array([[0, 0, 0, 0, 0], [14, 8, 3, 32, 96]], np.int32)
             measure_streak_table(tuple(fr), labels, stats, [1], cur=fr[1], prev=fr[0],
                                  contrast=(200.0, 150.0), engine="compiled")
+    union_roots(4, np.array([0, 2]), np.array([1, 1]))
     # the noise histogram and the detection masks of 8-bit frames
     change_histogram(*[np.rint(f).astype(np.uint8) for f in frames], 3, 4)
     spike_masks(*[np.rint(f).astype(np.uint8) for f in frames], 5, 15.0, 7.5)

@@ -834,19 +834,22 @@ def _merge_pieces(labels: np.ndarray, stats: np.ndarray, big: np.ndarray, merge_
         return
     sel = np.nonzero(ok)[0]
     sel = sel[np.lexsort((a_i[sel], k_i[sel]))]
-    parent: dict[int, int] = {}
+    if _kernels.AVAILABLE:
+        members, roots = _kernels.union_roots(stats.shape[0], idx[a_i[sel]], idx[b_i[sel]])
+    else:
+        parent: dict[int, int] = {}
 
-    def find(i):
-        parent.setdefault(i, i)
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
+        def find(i):
+            parent.setdefault(i, i)
+            while parent[i] != i:
+                parent[i] = parent[parent[i]]
+                i = parent[i]
+            return i
 
-    for ia, ib in zip(idx[a_i[sel]].tolist(), idx[b_i[sel]].tolist()):
-        parent[find(ib)] = find(ia)
-    members = np.fromiter(parent.keys(), dtype=np.int64, count=len(parent))
-    roots = np.fromiter((find(i) for i in members.tolist()), dtype=np.int64, count=members.size)
+        for ia, ib in zip(idx[a_i[sel]].tolist(), idx[b_i[sel]].tolist()):
+            parent[find(ib)] = find(ia)
+        members = np.fromiter(parent.keys(), dtype=np.int64, count=len(parent))
+        roots = np.fromiter((find(i) for i in members.tolist()), dtype=np.int64, count=members.size)
     # every member of ``parent`` belongs to a group of at least two pieces
     remap = np.arange(stats.shape[0], dtype=labels.dtype)
     remap[members] = roots
