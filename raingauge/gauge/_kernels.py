@@ -6,6 +6,13 @@ arithmetic as one loop per streak, compiled by numba, runs several times faster 
 allocates almost nothing.  Both give the same measurement up to the order in which sums
 are taken (tests/test_gauge_streaks.py compares them on simulated rain).
 
+The detection's whole-frame passes over a linear camera's 8-bit frames are here too, each
+giving exactly what its array or OpenCV form gives: the spike image of Eq. (19) summed along
+the fall and thresholded in one pass (:func:`spike_masks`), the labelling of the sparse mask
+from its runs with OpenCV's numbering (:func:`label_components`), the union of the pieces of
+one streak (:func:`union_roots`) and the histogram of the change for its noise
+(:func:`change_histogram`).
+
 Without numba the array form is used: ``AVAILABLE`` says which.
 """
 
@@ -23,7 +30,8 @@ except ImportError:  # pragma: no cover
     numba = None
     AVAILABLE = False
 
-__all__ = ["AVAILABLE", "label_components", "own_pixels", "profile_pass", "spike_masks", "change_histogram", "union_roots", "warm_up"]
+__all__ = ["AVAILABLE", "change_histogram", "label_components", "own_pixels", "profile_pass", "spike_masks",
+           "union_roots", "warm_up"]
 
 
 def _jit(fn):
