@@ -801,33 +801,41 @@ def _union_roots(n_nodes, first, second):
     return members, roots
 
 
-_WARM = False
+_WARMED: set = set()
 
 
-def warm_up() -> None:
-    """Compile the loops (or load them from numba's cache) for the gauge's inputs (float32
-    frames, and the 8-bit frames of a linear camera; 16- and 32-bit labels) now rather than
-    on the first frames of a live camera; once per process."""
-    global _WARM
-    if _WARM or not AVAILABLE:
+def warm_up(frames_8bit: bool = False) -> None:
+    """Compile the loops (or load them from numba's cache) for the gauge's inputs now rather
+    than on the first frames of a live camera; once per process and kind of frames.
+
+    Parameters
+    ----------
+    frames_8bit : bool
+        The frames are a linear camera's 8-bit ones, measured as they are (else float32
+        linearised frames); 16- and 32-bit labels either way.
+    """
+    kind = bool(frames_8bit)
+    if kind in _WARMED or not AVAILABLE:
         return
     from raingauge.gauge.streaks import measure_streak_table
 
     rng = np.random.default_rng(0)
     frames = [rng.normal(50.0, 2.0, (48, 32)).astype(np.float32) for _ in range(3)]
     frames[1][8:40, 14:17] += 80.0
-    for fr in (frames, [np.rint(f).astype(np.uint8) for f in frames]):
-        for dtype in (np.uint16, np.int32):
-            labels = np.zeros((48, 32), dtype)
-            labels[8:40, 14:17] = 1
-            stats = np.array([[0, 0, 0, 0, 0], [14, 8, 3, 32, 96]], np.int32)
-            measure_streak_table(tuple(fr), labels, stats, [1], cur=fr[1], prev=fr[0],
-                                 contrast=(200.0, 150.0), engine="compiled")
+    if kind:
+        frames = [np.rint(f).astype(np.uint8) for f in frames]
+    for dtype in (np.uint16, np.int32):
+        labels = np.zeros((48, 32), dtype)
+        labels[8:40, 14:17] = 1
+        stats = np.array([[0, 0, 0, 0, 0], [14, 8, 3, 32, 96]], np.int32)
+        measure_streak_table(tuple(frames), labels, stats, [1], cur=frames[1], prev=frames[0],
+                             contrast=(200.0, 150.0), engine="compiled")
+    if kind:
+        # the noise histogram and the detection masks of 8-bit frames
+        change_histogram(*frames, 3, 4)
+        spike_masks(*frames, 5, 15.0, 7.5)
+        spike_masks(*frames, 5, 15.0)
     union_roots(4, np.array([0, 2]), np.array([1, 1]))
-    # the noise histogram and the detection masks of 8-bit frames
-    change_histogram(*[np.rint(f).astype(np.uint8) for f in frames], 3, 4)
-    spike_masks(*[np.rint(f).astype(np.uint8) for f in frames], 5, 15.0, 7.5)
-    spike_masks(*[np.rint(f).astype(np.uint8) for f in frames], 5, 15.0)
     # the labelling, into 16- and 32-bit labels, of masks with and without a ragged last word
     for width in (32, 30):
         mask = np.zeros((48, width), np.uint8)
@@ -836,4 +844,4 @@ def warm_up() -> None:
     row_ptr, xs, xe = _runs(mask, np.zeros((1, 1), np.uint64), False)
     run_label = _run_components(row_ptr, xs, xe)[0]
     _paint_runs(np.zeros(mask.shape, np.int32), row_ptr, xs, xe, run_label)
-    _WARM = True
+    _WARMED.add(kind)

@@ -514,8 +514,8 @@ class RainGauge:
         from raingauge.physics.drops import FALL_VELOCITY_MODELS
 
         # the measurement loops compiled before the first frame (a live camera's frames would
-        # wait for it)
-        _kernels.warm_up()
+        # wait for it), for the frames it measures (a linear camera's 8-bit ones as they are)
+        _kernels.warm_up(frames_8bit=bool(profile.is_linear) and defocus_model == "uniform")
         if velocity_model not in FALL_VELOCITY_MODELS:
             raise ValueError(f"unknown velocity model {velocity_model!r}; valid: {list(FALL_VELOCITY_MODELS)}")
         if not (window_s > 0 and step_s > 0):
@@ -901,7 +901,9 @@ class RainGauge:
         # (2 a)^3 v / kappa(a) with a, v and kappa as measured (0 when it is not counted)
         estimate = np.zeros(len(plan))
         if np.any(st_c[1:, 4] > 0):
-            prepared, _ = self._measure_table(lab_c, st_c, lin, lin[0], lin[1], t, ref_bg=ref_bg,
+            # (the 8-bit canvases of a linear camera are the float ones' numbers)
+            canvas = raw if raw is not None else lin
+            prepared, _ = self._measure_table(lab_c, st_c, canvas, canvas[0], canvas[1], t, ref_bg=ref_bg,
                                               contrast=contrast, probe=True)
             cx = np.array([c[0] for c in centres])
             cy = np.array([c[1] for c in centres])
