@@ -189,6 +189,25 @@ def test_change_noise_of_8_bit_frames_equals_that_of_their_float_copies(sigma):
     assert as_u8 == pytest.approx(sigma * math.sqrt(1.5), rel=0.25)
 
 
+@pytest.mark.skipif(not __import__("raingauge.gauge._kernels", fromlist=["AVAILABLE"]).AVAILABLE,
+                    reason="numba not installed")
+def test_compiled_change_histogram_equals_numpy():
+    """The compiled histogram of 2 I_n - I_{n-1} - I_{n+1} over the sampled pixels is
+    np.bincount's, and the noise taken of it is the array form's to the bit (frame sizes
+    off the sampling steps included)."""
+    from raingauge.gauge import _kernels
+    from raingauge.gauge.rejection import _change_noise_u8, change_noise_dn
+
+    rng = np.random.default_rng(12)
+    for shape in ((270, 480), (31, 45), (1, 3)):
+        frames = [rng.integers(0, 256, shape).astype(np.uint8) for _ in range(3)]
+        sub = [f[::3, ::4] for f in frames]
+        c2 = 2 * sub[1].astype(np.int64) - sub[0] - sub[2]
+        np.testing.assert_array_equal(_kernels.change_histogram(*frames, 3, 4),
+                                      np.bincount((c2 + 510).ravel(), minlength=1021))
+        assert change_noise_dn(*frames) == _change_noise_u8(*sub, 3)
+
+
 def test_tolerance_is_capped_for_poorly_measured_streaks():
     """A streak measured too poorly to place within a factor of two of the law says nothing
     about it: the tolerance stops at the cap (faint moving texture would pass any wider

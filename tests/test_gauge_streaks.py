@@ -484,6 +484,143 @@ def test_compiled_streak_table_equals_the_array_form(background):
             np.testing.assert_array_equal(b[key], a[key])
 
 
+@pytest.mark.skipif(not __import__("raingauge.gauge._kernels", fromlist=["AVAILABLE"]).AVAILABLE,
+                    reason="numba not installed")
+def test_compiled_median_equals_numpy():
+    """The compiled loops' median (an insertion sort in place for short rows, np.sort
+    beyond) is np.median's for odd, even and long inputs, and sorts NaN last as np.sort."""
+    from raingauge.gauge import _kernels
+
+    rng = np.random.default_rng(4)
+    for n in (1, 2, 3, 7, 10, 64, 65, 200):
+        for ties in (False, True):
+            a = rng.normal(0.0, 5.0, n + 3)
+            if ties:
+                a = np.round(a)
+            expect = np.median(a[:n])
+            got = _kernels._median(a.copy(), n)
+            assert got == expect or (np.isnan(got) and np.isnan(expect)), (n, ties)
+    a = np.array([3.0, np.nan, 1.0, 2.0, np.nan, 0.5])
+    b = a.copy()
+    _kernels._sort_small(b, b.size)
+    np.testing.assert_array_equal(b, np.sort(a))
+    s4 = np.sort(a[:4])            # NaN sorted last, as by np.sort: the middle of the rest
+    assert _kernels._median(a.copy(), 4) == 0.5 * (s4[1] + s4[2])
+    assert math.isnan(_kernels._median(np.zeros(3), 0))
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_streak_table_reads_8bit_frames_as_their_float_image(engine):
+    """The 8-bit frames of a linear camera measure exactly as their float32 image does."""
+    from raingauge.gauge.streaks import measure_streak_table
+    from raingauge.render.simulator import render_clip
+
+    prof = CAM.replace(width_px=480, height_px=270)
+    frames, _ = render_clip(prof, n_frames=3, rain_rate_mm_h=50.0, seed=3, background="skimage:brick")
+    raw = [np.asarray(f, np.uint8) for f in frames]
+    lin = [f.astype(np.float32) for f in raw]
+    labels, stats = detect_streaks(np.minimum(lin[1] - lin[0], lin[1] - lin[2]), c=3.0)
+    sel = np.nonzero(stats[1:, 4] > 0)[0] + 1
+    assert sel.size >= 20
+    for contrast in (None, (200.0, 150.0)):
+        kw = dict(valid=stats[:, 4] > 0, contrast=contrast, noise_sigma=2.0, engine=engine)
+        a = measure_streak_table(tuple(lin), labels, stats, sel, cur=lin[1], prev=lin[0], **kw)
+        b = measure_streak_table(tuple(raw), labels, stats, sel, cur=raw[1], prev=raw[0], **kw)
+        assert a.keys() == b.keys()
+        for key in a:
+            np.testing.assert_array_equal(b[key], a[key], err_msg=key)
+
+
+@pytest.mark.skipif(not __import__("raingauge.gauge._kernels", fromlist=["AVAILABLE"]).AVAILABLE,
+                    reason="numba not installed")
+def test_compiled_labelling_equals_opencv():
+    """The compiled labelling from a mask's runs (raingauge.gauge._kernels.label_components)
+    gives OpenCV's 8-connected labels, their numbering, label type and stats, on random masks
+    of any shape and density (rows of a ragged last 8-pixel word included), an empty one and
+    a dense one past 65000 pixels (32-bit labels)."""
+    import cv2
+
+    from raingauge.gauge import _kernels
+
+    def opencv(mask):
+        ltype = cv2.CV_16U if cv2.countNonZero(mask) < 65000 else cv2.CV_32S
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8, ltype=ltype)
+        stats = stats[:, :5].copy()
+        stats[0] = 0
+        return n, labels, stats
+
+    rng = np.random.default_rng(11)
+    masks = [np.zeros((30, 40), np.uint8), ((rng.random((400, 400)) < 0.6) * 255).astype(np.uint8)]
+    for _ in range(150):
+        shape = (int(rng.integers(1, 50)), int(rng.integers(1, 70)))
+        masks.append(((rng.random(shape) < rng.uniform(0.01, 0.7)) * 255).astype(np.uint8))
+    for mask in masks:
+        n, labels, stats = opencv(mask)
+        n2, labels2, stats2 = _kernels.label_components(mask)
+        assert n2 == n
+        assert labels2.dtype == labels.dtype
+        np.testing.assert_array_equal(labels2, labels)
+        np.testing.assert_array_equal(stats2, stats)
+    assert masks[1].sum() // 255 >= 65000 and _kernels.label_components(masks[1])[1].dtype == np.int32
+
+
+def test_detection_from_8bit_frames_equals_that_of_their_spike_image():
+    """detect_streaks on the three 8-bit frames (one compiled pass summing Eq. (19) along the
+    fall, where numba is installed) labels exactly as on their int16 spike image, with and
+    without hysteresis, for odd and even smoothing lengths and thresholds off the integers;
+    slanted rain falls back to the spike image."""
+    from raingauge.gauge.streaks import spike_image
+    from raingauge.render.simulator import render_clip
+
+    prof = CAM.replace(width_px=480, height_px=270)
+    frames, _ = render_clip(prof, n_frames=3, rain_rate_mm_h=50.0, seed=5, background="skimage:brick")
+    trio = tuple(np.asarray(f, np.uint8) for f in frames)
+    rng = np.random.default_rng(8)
+    noise = tuple(rng.integers(0, 256, (23, 17)).astype(np.uint8) for _ in range(3))
+    for three in (trio, noise):
+        spike = spike_image(*three)
+        for c, grow, n_s, slope in ((3.0, 1.0, 5, 0.0), (2.7, 0.6, 5, 0.0), (3.3, 0.5, 4, 0.0), (2.0, 1.0, 7, 0.0),
+                                    (3.0, 1.0, 5, 0.2)):
+            a = detect_streaks(spike, c=c, grow=grow, smooth_px=n_s, slope=slope)
+            b = detect_streaks(three, c=c, grow=grow, smooth_px=n_s, slope=slope)
+            assert b[0].dtype == a[0].dtype
+            np.testing.assert_array_equal(b[0], a[0])
+            np.testing.assert_array_equal(b[1], a[1])
+    assert np.count_nonzero(detect_streaks(trio, c=3.0)[1][:, 4] > 0) >= 20
+
+
+@pytest.mark.skipif(not __import__("raingauge.gauge._kernels", fromlist=["AVAILABLE"]).AVAILABLE,
+                    reason="numba not installed")
+def test_compiled_union_find_equals_the_dict_form():
+    """The compiled union-find of the merge of pieces gives the members and roots of the
+    dict-based one (each pair's second set under its first's root, pairs in order)."""
+    from raingauge.gauge import _kernels
+
+    def by_dict(first, second):
+        parent = {}
+
+        def find(i):
+            parent.setdefault(i, i)
+            while parent[i] != i:
+                parent[i] = parent[parent[i]]
+                i = parent[i]
+            return i
+
+        for ia, ib in zip(first.tolist(), second.tolist()):
+            parent[find(ib)] = find(ia)
+        members = np.fromiter(parent.keys(), dtype=np.int64, count=len(parent))
+        return members, np.array([find(i) for i in members.tolist()], dtype=np.int64)
+
+    rng = np.random.default_rng(6)
+    for _ in range(300):
+        n = int(rng.integers(2, 60))
+        first, second = rng.integers(0, n, (2, int(rng.integers(0, 80))))
+        members, roots = _kernels.union_roots(n, first, second)
+        expect = by_dict(first, second)
+        np.testing.assert_array_equal(members, expect[0])
+        np.testing.assert_array_equal(roots, expect[1])
+
+
 def test_streak_table_engine_is_checked():
     from raingauge.gauge.streaks import measure_streak_table
 

@@ -6,6 +6,13 @@ arithmetic as one loop per streak, compiled by numba, runs several times faster 
 allocates almost nothing.  Both give the same measurement up to the order in which sums
 are taken (tests/test_gauge_streaks.py compares them on simulated rain).
 
+The detection's whole-frame passes over a linear camera's 8-bit frames are here too, each
+giving exactly what its array or OpenCV form gives: the spike image of Eq. (19) summed along
+the fall and thresholded in one pass (:func:`spike_masks`), the labelling of the sparse mask
+from its runs with OpenCV's numbering (:func:`label_components`), the union of the pieces of
+one streak (:func:`union_roots`) and the histogram of the change for its noise
+(:func:`change_histogram`).
+
 Without numba the array form is used: ``AVAILABLE`` says which.
 """
 
@@ -23,7 +30,8 @@ except ImportError:  # pragma: no cover
     numba = None
     AVAILABLE = False
 
-__all__ = ["AVAILABLE", "own_pixels", "profile_pass", "warm_up"]
+__all__ = ["AVAILABLE", "change_histogram", "label_components", "own_pixels", "profile_pass", "spike_masks",
+           "union_roots", "warm_up"]
 
 
 def _jit(fn):
@@ -33,11 +41,30 @@ def _jit(fn):
 
 
 @_jit
+def _sort_small(a, n):
+    """Sort a[:n] in place by insertion, NaN last (the order of ``np.sort``)."""
+    for i in range(1, n):
+        v = a[i]
+        j = i - 1
+        if v != v:
+            continue
+        while j >= 0 and (a[j] != a[j] or a[j] > v):
+            a[j + 1] = a[j]
+            j -= 1
+        a[j + 1] = v
+
+
+@_jit
 def _median(a, n):
-    """Median of a[:n] (mean of the two middle values for even n; NaN for none)."""
+    """Median of a[:n] (mean of the two middle values for even n; NaN for none); a[:n]
+    is sorted in place when short."""
     if n == 0:
         return np.nan
-    s = np.sort(a[:n])
+    if n <= 64:
+        _sort_small(a, n)
+        s = a
+    else:
+        s = np.sort(a[:n])
     if n % 2 == 1:
         return s[(n - 1) // 2]
     return (s[n // 2 - 1] + s[n // 2]) / 2.0
@@ -69,10 +96,11 @@ def _box_gain(uu, vv, nk, hw):
 
 
 @_jit
-def _refine_box_width(o, v, n, cen, w0, factors):
+def _refine_box_width(o, v, n, cen, w0, factors, uu, vv, gain):
     """:func:`raingauge.gauge.streaks._refine_box_width` for one streak: least-squares
     width of a pixel-integrated box (height free) over the pixels at offsets o[:n] with
-    change v[:n], on the grid w0 * factors refined by a parabola in ln w."""
+    change v[:n], on the grid w0 * factors refined by a parabola in ln w; ``uu``, ``vv``
+    (at least n) and ``gain`` (factors' size) are scratch space."""
     good = math.isfinite(w0) and math.isfinite(cen) and w0 > 0
     if good:
         base = w0 if w0 > 0.6 else 0.6
@@ -82,8 +110,6 @@ def _refine_box_width(o, v, n, cen, w0, factors):
         c = 0.0
     nf = factors.size
     reach = 0.5 * base * factors[nf - 1] + 1.0
-    uu = np.empty(n)
-    vv = np.empty(n)
     nk = 0
     for i in range(n):
         u = abs(o[i] - c)
@@ -91,7 +117,6 @@ def _refine_box_width(o, v, n, cen, w0, factors):
             uu[nk] = u
             vv[nk] = v[i]
             nk += 1
-    gain = np.empty(nf)
     for j in range(nf):
         gain[j] = _box_gain(uu, vv, nk, 0.5 * base * factors[j])
     jbest = 0
@@ -126,6 +151,31 @@ def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, labels
     chi2_out = np.full(K, np.inf)
     ok_out = np.zeros(K, np.bool_)
     noise2 = max(noise_sigma, 1e-3) ** 2
+    # scratch space for the largest streak, shared by all
+    cap_max = 0
+    row_max = 0
+    for k in range(K):
+        mh = m + 2
+        if has_bw:
+            mh += int(math.ceil(0.5 * bw[k]))
+        cap_k = ch[k] * (min(x[k] + w[k] + mh, N) - max(x[k] - mh, 0))
+        cap_max = max(cap_max, cap_k)
+        row_max = max(row_max, ch[k])
+    p_row = np.empty(cap_max, np.int64)
+    p_ob = np.empty(cap_max)
+    p_val = np.empty(cap_max)
+    s_o = np.empty(cap_max)
+    s_v = np.empty(cap_max)
+    s_row = np.empty(cap_max, np.int64)
+    uu = np.empty(cap_max)
+    vv = np.empty(cap_max)
+    gain = np.empty(factors.size)
+    row_sum = np.empty(row_max)
+    f_sum = np.empty(row_max)
+    f_n = np.empty(row_max)
+    base = np.empty(row_max)
+    sm = np.empty(row_max)
+    buf = np.empty(row_max)
     for k in range(K):
         mh = m + 2
         band_width = row_width[k]
@@ -139,14 +189,11 @@ def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, labels
         nrow = ch[k]
         yk0 = y0[k]
         lab_k = L[k]
-        cap = nrow * (x1 - x0)
-        p_row = np.empty(cap, np.int64)
-        p_ob = np.empty(cap)
-        p_val = np.empty(cap)
         np_ = 0
-        row_sum = np.zeros(nrow)
-        f_sum = np.zeros(nrow)
-        f_n = np.zeros(nrow)
+        for r in range(nrow):
+            row_sum[r] = 0.0
+            f_sum[r] = 0.0
+            f_n[r] = 0.0
         flank_at = 0.5 * band_width + flank_gap
         for r in range(nrow):
             gy = yk0 + r
@@ -180,8 +227,8 @@ def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, labels
                     f_sum[r] += val
                     f_n[r] += 1.0
         if has_bw:
-            base = np.zeros(nrow)
             for r in range(nrow):
+                base[r] = 0.0
                 lo = max(r - flank_half_rows, 0)
                 hi = min(r + flank_half_rows, nrow - 1)
                 sv = 0.0
@@ -196,13 +243,11 @@ def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, labels
         for i in range(np_):
             row_sum[p_row[i]] += p_val[i]
         # 3-row smoothing, zero padded
-        sm = np.empty(nrow)
         for r in range(nrow):
             a = row_sum[r - 1] if r > 0 else 0.0
             b = row_sum[r + 1] if r + 1 < nrow else 0.0
             sm[r] = (a + row_sum[r] + b) / 3.0
         # plateau: median over the middle half of the streak's rows
-        buf = np.empty(nrow)
         nb = 0
         lo_y = y[k] + 0.25 * h[k]
         hi_y = y[k] + 0.75 * h[k]
@@ -252,9 +297,6 @@ def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, labels
         n_pr = math.floor(min(hi_r, y1[k] - 1.0)) - math.ceil(max(lo_r, float(yk0))) + 1
         enough = n_pr >= 2
         mid = 0.5 * (top_r + bot_r)
-        s_o = np.empty(np_)
-        s_v = np.empty(np_)
-        s_row = np.empty(np_, np.int64)
         ns = 0
         for i in range(np_):
             gyf = float(yk0 + p_row[i])
@@ -298,7 +340,7 @@ def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, labels
             if good:
                 win = 0.5 * wl + 1.5
                 cen_o = cen
-        w_app = _refine_box_width(s_o, s_v, ns, cen, w_app, factors)
+        w_app = _refine_box_width(s_o, s_v, ns, cen, w_app, factors, uu, vv, gain)
         ok = has and c0 > 0 and ns >= 6 and math.isfinite(w_app) and w_app > 0
         # goodness of the uniform model on the plateau rows
         n_r = 0
@@ -336,8 +378,13 @@ def _own(p_, c_, n_, tuple_mode, cur, has_cur, prev, has_prev, e_r, c_ref, has_c
          x0, y0):
     K = L.size
     total = 0
+    biggest = 0
     for k in range(K):
         total += w[k] * h[k]
+        biggest = max(biggest, w[k] * h[k])
+    # (one scratch array for all streaks: an array allocated in the loop would be
+    # reference-counted in the inner loops)
+    vals = np.empty(biggest)
     own_k = np.empty(total, np.int64)
     own_y = np.empty(total, np.int64)
     own_x = np.empty(total, np.int64)
@@ -360,7 +407,6 @@ def _own(p_, c_, n_, tuple_mode, cur, has_cur, prev, has_prev, e_r, c_ref, has_c
         sbb = 0.0
         sd = 0.0
         sbd = 0.0
-        vals = np.empty(w[k] * h[k])
         for gy in range(y[k], y[k] + h[k]):
             row_has = False
             for gx in range(x[k], x[k] + w[k]):
@@ -486,25 +532,316 @@ def profile_pass(change, labels, valid, own, *, margin_px, sigma_min, cur, contr
                  int(flank_half_rows))
 
 
-_WARM = False
+@_jit
+def _runs(mask, words, use_words):
+    """The runs of nonzero pixels of ``mask`` row by row: (row start index (M + 1,), first
+    column, last column (inclusive)) of each run, in raster order.  Zero 8-pixel words of
+    ``words`` (the mask's rows as uint64, when ``use_words``) are skipped whole."""
+    M, N = mask.shape
+    # (room for the most runs a mask can hold: untouched memory costs nothing, and arrays
+    # not rebound in the loop keep it free of reference counting)
+    cap = M * ((N + 1) // 2)
+    xs = np.empty(cap, np.int64)
+    xe = np.empty(cap, np.int64)
+    row_ptr = np.empty(M + 1, np.int64)
+    n = 0
+    nw = N // 8 if use_words else 0
+    for y in range(M):
+        row_ptr[y] = n
+        start = -1
+        for wi in range(nw):
+            if words[y, wi] == 0:
+                if start >= 0:
+                    xs[n] = start
+                    xe[n] = 8 * wi - 1
+                    n += 1
+                    start = -1
+                continue
+            for x in range(8 * wi, 8 * wi + 8):
+                if mask[y, x] != 0:
+                    if start < 0:
+                        start = x
+                elif start >= 0:
+                    xs[n] = start
+                    xe[n] = x - 1
+                    n += 1
+                    start = -1
+        for x in range(8 * nw, N):
+            if mask[y, x] != 0:
+                if start < 0:
+                    start = x
+            elif start >= 0:
+                xs[n] = start
+                xe[n] = x - 1
+                n += 1
+                start = -1
+        if start >= 0:
+            xs[n] = start
+            xe[n] = N - 1
+            n += 1
+    row_ptr[M] = n
+    return row_ptr, xs[:n].copy(), xe[:n].copy()
 
 
-def warm_up() -> None:
-    """Compile the loops (or load them from numba's cache) for the gauge's inputs (float32
-    frames, 16- and 32-bit labels) now rather than on the first frames of a live camera;
-    once per process."""
-    global _WARM
-    if _WARM or not AVAILABLE:
+@_jit
+def _find(parent, i):
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@_jit
+def _run_components(row_ptr, xs, xe):
+    """8-connected components of the runs of :func:`_runs`, numbered as OpenCV's block-based
+    labelling (``cv2.connectedComponentsWithStats``, 8-connectivity) numbers them: by the
+    first 2 x 2 block (in raster order of the blocks) holding a pixel of each.  Returns the
+    label of each run and the stats (n + 1, 5) int32: x, y, width, height, area (row 0, the
+    background, all 0)."""
+    M = row_ptr.size - 1
+    n = xs.size
+    parent = np.arange(n)
+    for y in range(1, M):
+        j = row_ptr[y - 1]
+        j_end = row_ptr[y]
+        for i in range(row_ptr[y], row_ptr[y + 1]):
+            # runs of the row above touching this one (8-connectivity: one column beyond)
+            while j < j_end and xe[j] < xs[i] - 1:
+                j += 1
+            k = j
+            while k < j_end and xs[k] <= xe[i] + 1:
+                ri = _find(parent, i)
+                rk = _find(parent, k)
+                if ri != rk:
+                    if ri < rk:
+                        parent[rk] = ri
+                    else:
+                        parent[ri] = rk
+                k += 1
+    # each component's first block: the least (y // 2, x // 2) of its runs
+    width = 0
+    for i in range(n):
+        if xe[i] + 1 > width:
+            width = xe[i] + 1
+    bw = width // 2 + 1
+    key = np.full(n, np.iinfo(np.int64).max)
+    for y in range(M):
+        for i in range(row_ptr[y], row_ptr[y + 1]):
+            r = _find(parent, i)
+            kk = (y // 2) * bw + xs[i] // 2
+            if kk < key[r]:
+                key[r] = kk
+    roots = np.empty(n, np.int64)
+    n_comp = 0
+    for i in range(n):
+        if parent[i] == i:
+            roots[n_comp] = i
+            n_comp += 1
+    roots = roots[:n_comp]
+    order = np.argsort(key[roots])
+    comp_label = np.zeros(n, np.int64)
+    for c in range(n_comp):
+        comp_label[roots[order[c]]] = c + 1
+    run_label = np.empty(n, np.int64)
+    x0 = np.full(n_comp + 1, np.iinfo(np.int64).max)
+    y0 = np.full(n_comp + 1, np.iinfo(np.int64).max)
+    x1 = np.full(n_comp + 1, -1)
+    y1 = np.full(n_comp + 1, -1)
+    area = np.zeros(n_comp + 1, np.int64)
+    for y in range(M):
+        for i in range(row_ptr[y], row_ptr[y + 1]):
+            lab = comp_label[_find(parent, i)]
+            run_label[i] = lab
+            x0[lab] = min(x0[lab], xs[i])
+            x1[lab] = max(x1[lab], xe[i])
+            y0[lab] = min(y0[lab], y)
+            y1[lab] = max(y1[lab], y)
+            area[lab] += xe[i] - xs[i] + 1
+    stats = np.zeros((n_comp + 1, 5), np.int32)
+    for c in range(1, n_comp + 1):
+        stats[c, 0] = x0[c]
+        stats[c, 1] = y0[c]
+        stats[c, 2] = x1[c] - x0[c] + 1
+        stats[c, 3] = y1[c] - y0[c] + 1
+        stats[c, 4] = area[c]
+    return run_label, stats
+
+
+@_jit
+def _paint_runs(labels, row_ptr, xs, xe, run_label):
+    """Write each run's label into ``labels`` (zero elsewhere, as given)."""
+    M = row_ptr.size - 1
+    for y in range(M):
+        for i in range(row_ptr[y], row_ptr[y + 1]):
+            lab = run_label[i]
+            for x in range(xs[i], xe[i] + 1):
+                labels[y, x] = lab
+
+
+def label_components(mask):
+    """``cv2.connectedComponentsWithStats(mask, connectivity=8, ltype=...)`` for a sparse
+    mask, from its runs: (n, labels, stats), the labels uint16 while the mask has fewer than
+    65000 pixels (else int32), numbered as OpenCV numbers them; the stats' row 0 (the
+    background) is 0 and only their first five columns are given.
+
+    Parameters
+    ----------
+    mask : (M, N) uint8 array
+        Nonzero where a pixel is set.
+    """
+    mask = np.ascontiguousarray(mask, dtype=np.uint8)
+    M, N = mask.shape
+    use_words = N >= 8 and N % 8 == 0
+    words = mask.view(np.uint64) if use_words else np.zeros((1, 1), np.uint64)
+    row_ptr, xs, xe = _runs(mask, words, use_words)
+    run_label, stats = _run_components(row_ptr, xs, xe)
+    n_px = int(stats[:, 4].sum())
+    labels = np.zeros((M, N), np.uint16 if n_px < 65000 else np.int32)
+    _paint_runs(labels, row_ptr, xs, xe, run_label)
+    return stats.shape[0], labels, stats
+
+
+@_jit
+def _spike_masks(prev, cur, nxt, n_s, thr, thr_low, has_low, mask, low):
+    """Eq. (19) summed over ``n_s`` rows along the fall, from the 8-bit frames of a linear
+    camera: mask = 255 where sum min(I_n - I_{n-1}, I_n - I_{n+1}) >= thr (and low where it
+    is >= thr_low), the sum centred on the row (its first n_s // 2 and last n_s - 1 - n_s // 2
+    rows, where no window is whole, summing to 0).  Integer sums, exact."""
+    M, N = cur.shape
+    half = n_s // 2
+    ring = np.zeros((n_s, N), np.int64)
+    acc = np.zeros(N, np.int64)
+    zero_hi = 255 if 0 >= thr else 0
+    zero_lo = 255 if 0 >= thr_low else 0
+    for y in range(half):
+        for x in range(N):
+            mask[y, x] = zero_hi
+            if has_low:
+                low[y, x] = zero_lo
+    for y in range(M - (n_s - 1 - half), M):
+        for x in range(N):
+            mask[y, x] = zero_hi
+            if has_low:
+                low[y, x] = zero_lo
+    for r in range(M):
+        slot = r % n_s
+        out = r - (n_s - 1) + half
+        for x in range(N):
+            a = np.int64(prev[r, x])
+            b = np.int64(nxt[r, x])
+            v = np.int64(cur[r, x]) - (a if a > b else b)
+            t = acc[x] + v - ring[slot, x]
+            ring[slot, x] = v
+            acc[x] = t
+            if r >= n_s - 1:
+                mask[out, x] = 255 if t >= thr else 0
+                if has_low:
+                    low[out, x] = 255 if t >= thr_low else 0
+
+
+def spike_masks(prev, cur, nxt, smooth_px, threshold, threshold_low=None):
+    """The detection masks of :func:`raingauge.gauge.streaks.detect_streaks` straight from
+    the 8-bit frames n-1, n, n+1 of a linear camera: (mask, low) uint8 (0 or 255), the spike
+    image of Eq. (19) summed over ``smooth_px`` rows compared with ``threshold`` (and
+    ``threshold_low``; low is None without it)."""
+    prev, cur, nxt = (np.ascontiguousarray(a, dtype=np.uint8) for a in (prev, cur, nxt))
+    mask = np.empty(cur.shape, np.uint8)
+    has_low = threshold_low is not None
+    low = np.empty(cur.shape, np.uint8) if has_low else np.empty((1, 1), np.uint8)
+    _spike_masks(prev, cur, nxt, int(smooth_px), float(threshold), float(threshold_low) if has_low else 0.0,
+                 has_low, mask, low)
+    return mask, (low if has_low else None)
+
+
+@_jit
+def _change_hist(prev, cur, nxt, row_step, col_step, hist):
+    M, N = cur.shape
+    for y in range(0, M, row_step):
+        for x in range(0, N, col_step):
+            hist[2 * np.int64(cur[y, x]) - np.int64(prev[y, x]) - np.int64(nxt[y, x]) + 510] += 1
+
+
+def union_roots(n_nodes, first, second):
+    """Groups of the pairs (first[i], second[i]) of nodes < ``n_nodes``, joined in order (each
+    pair's second set under its first's root): (members, root of each)."""
+    return _union_roots(int(n_nodes), _i64(first), _i64(second))
+
+
+def change_histogram(prev, cur, nxt, row_step, col_step):
+    """Histogram of 2 I_n - I_{n-1} - I_{n+1} + 510 over every ``row_step``-th row and
+    ``col_step``-th column of 8-bit frames: (1021,) int64 counts (as ``np.bincount`` of
+    those samples)."""
+    hist = np.zeros(1021, np.int64)
+    _change_hist(np.ascontiguousarray(prev, dtype=np.uint8), np.ascontiguousarray(cur, dtype=np.uint8),
+                 np.ascontiguousarray(nxt, dtype=np.uint8), int(row_step), int(col_step), hist)
+    return hist
+
+
+@_jit
+def _union_roots(n_nodes, first, second):
+    """Union-find over the pairs (first[i], second[i]) taken in order, the root of the second's
+    set put under the root of the first's: (members, their roots), the members in the order
+    they first appear in the pairs (first, then second, of each pair)."""
+    parent = np.full(n_nodes, -1, np.int64)
+    members = np.empty(2 * first.size, np.int64)
+    n_mem = 0
+    for i in range(first.size):
+        for node in (first[i], second[i]):
+            if parent[node] < 0:
+                parent[node] = node
+                members[n_mem] = node
+                n_mem += 1
+        rb = _find(parent, second[i])
+        ra = _find(parent, first[i])
+        parent[rb] = ra
+    members = members[:n_mem]
+    roots = np.empty(n_mem, np.int64)
+    for j in range(n_mem):
+        roots[j] = _find(parent, members[j])
+    return members, roots
+
+
+_WARMED: set = set()
+
+
+def warm_up(frames_8bit: bool = False) -> None:
+    """Compile the loops (or load them from numba's cache) for the gauge's inputs now rather
+    than on the first frames of a live camera; once per process and kind of frames.
+
+    Parameters
+    ----------
+    frames_8bit : bool
+        The frames are a linear camera's 8-bit ones, measured as they are (else float32
+        linearised frames); 16- and 32-bit labels either way.
+    """
+    kind = bool(frames_8bit)
+    if kind in _WARMED or not AVAILABLE:
         return
     from raingauge.gauge.streaks import measure_streak_table
 
     rng = np.random.default_rng(0)
     frames = [rng.normal(50.0, 2.0, (48, 32)).astype(np.float32) for _ in range(3)]
     frames[1][8:40, 14:17] += 80.0
+    if kind:
+        frames = [np.rint(f).astype(np.uint8) for f in frames]
     for dtype in (np.uint16, np.int32):
         labels = np.zeros((48, 32), dtype)
         labels[8:40, 14:17] = 1
         stats = np.array([[0, 0, 0, 0, 0], [14, 8, 3, 32, 96]], np.int32)
         measure_streak_table(tuple(frames), labels, stats, [1], cur=frames[1], prev=frames[0],
                              contrast=(200.0, 150.0), engine="compiled")
-    _WARM = True
+    if kind:
+        # the noise histogram and the detection masks of 8-bit frames
+        change_histogram(*frames, 3, 4)
+        spike_masks(*frames, 5, 15.0, 7.5)
+        spike_masks(*frames, 5, 15.0)
+    union_roots(4, np.array([0, 2]), np.array([1, 1]))
+    # the labelling, into 16- and 32-bit labels, of masks with and without a ragged last word
+    for width in (32, 30):
+        mask = np.zeros((48, width), np.uint8)
+        mask[8:40, 14:17] = 255
+        label_components(mask)
+    row_ptr, xs, xe = _runs(mask, np.zeros((1, 1), np.uint64), False)
+    run_label = _run_components(row_ptr, xs, xe)[0]
+    _paint_runs(np.zeros(mask.shape, np.int32), row_ptr, xs, xe, run_label)
+    _WARMED.add(kind)

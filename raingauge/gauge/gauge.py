@@ -381,6 +381,21 @@ def drop_brightness_dn(samples_dn, background_dn, *, q_min: float = 0.6, q_ref: 
     return float(np.median(b)) + c
 
 
+def _mean_linear(frame: np.ndarray, step: int) -> float:
+    """``np.mean(frame[::step, ::step])`` of the frame as linear float32 intensities
+    (8-bit frames of a linear camera as ``frame.astype(np.float32)``) [gray levels].
+
+    Float32 sums of 8-bit values are exact while they stay below 2^24, in whatever order
+    they are taken: then the mean of the samples' float32 copy is that of the float32
+    frame's strided samples, to the bit."""
+    sub = frame[::step, ::step]
+    if sub.dtype == np.float32:
+        return float(np.mean(sub))
+    if sub.dtype == np.uint8 and sub.size * 255 < 2 ** 24:
+        return float(np.mean(sub.astype(np.float32)))
+    return float(np.mean(frame.astype(np.float32)[::step, ::step]))
+
+
 def _percentile_of_sorted(s: np.ndarray, lo: int, percentile: float) -> float:
     """``np.percentile(s[lo:], percentile)`` of an increasing array (the same linear
     interpolation, in the same arithmetic), without sorting again."""
@@ -499,8 +514,8 @@ class RainGauge:
         from raingauge.physics.drops import FALL_VELOCITY_MODELS
 
         # the measurement loops compiled before the first frame (a live camera's frames would
-        # wait for it)
-        _kernels.warm_up()
+        # wait for it), for the frames it measures (a linear camera's 8-bit ones as they are)
+        _kernels.warm_up(frames_8bit=bool(profile.is_linear) and defocus_model == "uniform")
         if velocity_model not in FALL_VELOCITY_MODELS:
             raise ValueError(f"unknown velocity model {velocity_model!r}; valid: {list(FALL_VELOCITY_MODELS)}")
         if not (window_s > 0 and step_s > 0):
@@ -553,6 +568,8 @@ class RainGauge:
         self._prev_counted: list = []                   # the drops of that frame
         self._gaps: deque = deque()                     # (t_before, t_after) of gaps in the frame times
         self._noise_log: deque = deque(maxlen=300)      # noise of the recent frames [gray levels]
+        self._n_noise = 0                               # frames logged in it
+        self._noise_median = (0, None)                  # (frames logged, median of the log) when last taken
         self._sharpness: deque = deque(maxlen=int(max(10 * profile.frame_rate_hz, 10)))
         self._brightness = _SampleRing(BRIGHTNESS_SAMPLES)   # (E_b, E_r estimate) of law-abiding streaks
         #: why measured streaks were not counted (diagnostics)
@@ -570,6 +587,8 @@ class RainGauge:
         self._empty_scale = self._typical_drop_rate()
         # a linear camera: Eq. (19) on the 8-bit frames themselves, exactly, in int16
         self._linear_u8 = bool(profile.is_linear)
+        # (the pillbox model's measurement takes the change of float32 frames)
+        self._u8_direct = self._linear_u8 and defocus_model == "uniform"
         self._white_dn = float(profile.linearize(np.array([[255]], np.uint8))[0, 0])
 
     # ------------------------------------------------------------------ public
@@ -611,9 +630,14 @@ class RainGauge:
             self._gaps.append((self._t_in, t_s))
         self._t_in = t_s
         self._n_in += 1
-        lin = self.profile.linearize(frame)
-        if lin.dtype != np.float32:
-            lin = lin.astype(np.float32)
+        if self._u8_direct and frame.dtype == np.uint8:
+            # a linear camera's 8-bit codes are its linear intensities: the measurement reads
+            # them as they are, and a float32 image is made only of the parts used as one
+            lin = frame
+        else:
+            lin = self.profile.linearize(frame)
+            if lin.dtype != np.float32:
+                lin = lin.astype(np.float32)
         self._buffer.append((t_s, lin, frame if frame.dtype == np.uint8 else lin))
         out: list[dict] = []
         if len(self._buffer) == 3:
@@ -677,7 +701,7 @@ class RainGauge:
 
         flags = set()
         sub = raw[::4, ::4]
-        self._last_mean_bg = float(np.mean(cur[::4, ::4]))
+        self._last_mean_bg = _mean_linear(cur, 4)
         e_r = (self._drop_brightness() if self._brightness_known(10)
                else NOMINAL_DROP_BRIGHTNESS_DN)
         # a focused streak changes a pixel by ~5 % of the drop's contrast (beta ~ pi w / 4 L)
@@ -698,7 +722,9 @@ class RainGauge:
             n_big = np.count_nonzero(size >= self._motion_dn)
         if n_big / size.size > 0.005:
             flags.add("scene_motion")
-        lap = cv2.Laplacian(cv2.GaussianBlur(cur[::2, ::2], (3, 3), 0), cv2.CV_32F)
+        half = cur[::2, ::2]
+        lap = cv2.Laplacian(cv2.GaussianBlur(half if half.dtype == np.float32 else half.astype(np.float32), (3, 3), 0),
+                            cv2.CV_32F)
         sharp = cv2.norm(lap, cv2.NORM_L1) / lap.size
         if len(self._sharpness) >= 10:
             ref = float(np.median(self._sharpness))
@@ -711,13 +737,15 @@ class RainGauge:
 
     def _analyse(self, prev, cur, nxt, raw, t, gap, raws=None):
         prof = self.profile
-        if raws is not None and all(r.dtype == np.uint8 for r in raws):
-            spike = spike_image(*raws)
-        else:
-            spike = spike_image(prev, cur, nxt)
-        # the change I_n - (I_{n-1} + I_{n+1}) / 2 is computed only where it is used
-        change = (prev, cur, nxt)
         u8 = raws is not None and all(r.dtype == np.uint8 for r in raws)
+        if not u8 and any(a.dtype == np.uint8 for a in (prev, cur, nxt)):
+            # 8-bit frames of a linear camera beside float ones: all as linear float32
+            prev, cur, nxt = (a.astype(np.float32) if a.dtype == np.uint8 else a for a in (prev, cur, nxt))
+        # (8-bit frames: the spike image is summed along the fall as it is taken)
+        spike = tuple(raws) if u8 else spike_image(prev, cur, nxt)
+        # the change I_n - (I_{n-1} + I_{n+1}) / 2 is computed only where it is used (the
+        # frames are 8-bit for a linear camera: the same numbers)
+        change = (prev, cur, nxt)
         if u8:
             import cv2
 
@@ -731,6 +759,7 @@ class RainGauge:
         noise = change_noise_dn(*raws) if u8 else change_noise_dn(prev, cur, nxt)   # (8 bits: the same)
         self._frame_noise_change = max(noise, self.noise_change)
         self._noise_log.append(self._frame_noise_change / math.sqrt(1.5))
+        self._n_noise += 1
         flags = self._frame_flags(raw, cur, neighbour_change, gap)
         slope = self._rain_slope()
         self._frame_slope = slope
@@ -853,7 +882,7 @@ class RainGauge:
             return
         lin, raw, centres = probe.canvas(frames, plan, min(e_r, self._white_dn), raws=raws,
                                          delinearize=prof.delinearize)
-        spike = spike_image(*raw) if raw is not None else spike_image(*lin)
+        spike = tuple(raw) if raw is not None else spike_image(*lin)
         lab_c, st_c = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope, grow=vol.grow)
         weights = self.volume.histogram_weights(hist, min(e_r, self._white_dn))
         wind = self._wind_m_s()
@@ -867,7 +896,7 @@ class RainGauge:
             r = int(math.ceil(p["radius_px"]))
             xa = int(round(min(p["p0"][0], p["p1"][0]))) - r
             xb = int(round(max(p["p0"][0], p["p1"][0]))) + r + 1
-            behind = frames[0][int(p["p0"][1]):int(p["p1"][1]) + 1, max(xa, 0):xb]
+            behind = frames[0][int(p["p0"][1]):int(p["p1"][1]) + 1, max(xa, 0):xb].astype(np.float32, copy=False)
             kap = float(vol.kappa(p["radius_m"], weights=weights, noise_dn=noise_dn, wind_m_s=wind))
             if behind.size and kap >= floor:
                 # p over the pixels behind the drop, averaged as kappa averages it over the
@@ -879,7 +908,9 @@ class RainGauge:
         # (2 a)^3 v / kappa(a) with a, v and kappa as measured (0 when it is not counted)
         estimate = np.zeros(len(plan))
         if np.any(st_c[1:, 4] > 0):
-            prepared, _ = self._measure_table(lab_c, st_c, lin, lin[0], lin[1], t, ref_bg=ref_bg,
+            # (the 8-bit canvases of a linear camera are the float ones' numbers)
+            canvas = raw if raw is not None else lin
+            prepared, _ = self._measure_table(lab_c, st_c, canvas, canvas[0], canvas[1], t, ref_bg=ref_bg,
                                               contrast=contrast, probe=True)
             cx = np.array([c[0] for c in centres])
             cy = np.array([c[1] for c in centres])
@@ -1166,10 +1197,11 @@ class RainGauge:
         wind = self._wind_m_s()
         if prepared:
             self._prune_tracks(prepared[0]["t"])
-        for c in prepared:
+        qs = self._photometric_qs(prepared, e_r)
+        for c, q in zip(prepared, qs):
             t, w_app, mot, dx, xc, yc = c["t"], c["w_app"], c["mot"], c["dx"], c["xc"], c["yc"]
             vol = c.get("vol", self.volume)
-            a = self._drop_radius(c, e_r, vol)
+            a = self._drop_radius(c, e_r, vol, q=q)
             if a is None:
                 rejected += 1
                 self.rejections["defocus_photometric"] += 1
@@ -1206,10 +1238,26 @@ class RainGauge:
             counted.append(d)
         return counted, rejected
 
-    def _drop_radius(self, c: dict, e_r: float, vol) -> float | None:
+    def _photometric_qs(self, prepared: list, e_r: float) -> list:
+        """The photometric focus q of Eq. (18) of each candidate of ``prepared`` with a
+        photometric measurement, at once (:func:`photometric_focus` is elementwise: the same
+        numbers one by one); None for the others and without a drop brightness."""
+        idx = [i for i, c in enumerate(prepared) if c["photo"] is not None]
+        qs = [None] * len(prepared)
+        if not idx or not np.isfinite(e_r):
+            return qs
+        ib = np.array([prepared[i]["photo"][0] for i in idx], dtype=float)
+        total = np.array([prepared[i]["photo"][1] for i in idx], dtype=float)
+        w_app = np.array([prepared[i]["w_app"] for i in idx], dtype=float)
+        for i, q in zip(idx, photometric_focus(total, w_app, e_r - ib).tolist()):
+            qs[i] = q
+        return qs
+
+    def _drop_radius(self, c: dict, e_r: float, vol, q: float | None = None) -> float | None:
         """The radius a [m] of a measured streak ``c``: the photometric focus q of Eq. (18)
         takes the blur out of its width, and the depth its size is typically seen at sets
-        the scale; None when q fails the defocus test."""
+        the scale; None when q fails the defocus test.  ``q``: the focus when already taken
+        (:meth:`_photometric_qs`)."""
         prof = self.profile
         f = prof.focal_length_px
         z0 = prof.focus_distance_m
@@ -1217,7 +1265,8 @@ class RainGauge:
         if c["photo"] is None:
             return float(vol.true_radius_m(w_app * z0 / (2 * f)))
         ib, total = c["photo"]
-        q = float(photometric_focus(total, w_app, e_r - ib)) if np.isfinite(e_r) else 1.0
+        if q is None:
+            q = float(photometric_focus(total, w_app, e_r - ib)) if np.isfinite(e_r) else 1.0
         if not q >= vol.q_min:
             return None
         w_true = w_app * math.sqrt(min(q, 1.0))
@@ -1240,8 +1289,17 @@ class RainGauge:
         at the median noise of the recent frames, as a function of the drop contrast [gray
         levels] (None: the volume's nominal contrast), and a key of it."""
         vol = self.volume
-        noise = float(np.median(self._noise_log)) if self._noise_log else None
+        noise = self._median_noise()
         return (lambda c: vol.brightness_q_at(noise, c)), (id(vol), noise)
+
+    def _median_noise(self) -> float | None:
+        """The median noise of the recent frames [gray levels] (None before the first), taken
+        once per frame logged."""
+        if not self._noise_log:
+            return None
+        if self._noise_median[0] != self._n_noise:
+            self._noise_median = (self._n_noise, float(np.median(self._noise_log)))
+        return self._noise_median[1]
 
     def _drop_brightness(self) -> float:
         """The drop brightness E_r [gray levels] from the law-abiding streaks' samples

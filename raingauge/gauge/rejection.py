@@ -336,6 +336,12 @@ def change_noise_dn(prev, cur, nxt, *, step: int = 4, along_px: int = 1, iterati
     # per-pixel noise: every 3rd row too (~77k samples at 1280x720: the standard deviation to 0.3 %)
     sl = (slice(None, None, 1 if k > 1 else 3), slice(None, None, step))
     if k == 1 and all(np.asarray(a).dtype == np.uint8 for a in (prev, cur, nxt)):
+        from raingauge.gauge import _kernels
+
+        if _kernels.AVAILABLE and np.ndim(cur) == 2:
+            # the histogram in one compiled pass over the samples
+            h = _kernels.change_histogram(prev, cur, nxt, sl[0].step, sl[1].step)
+            return _change_noise_of_histogram(h.astype(np.float64), int(h.sum()), iterations)
         return _change_noise_u8(prev[sl], cur[sl], nxt[sl], iterations)
     ch = np.asarray(cur, dtype=np.float32)[sl] - 0.5 * (np.asarray(prev, dtype=np.float32)[sl]
                                                         + np.asarray(nxt, dtype=np.float32)[sl])
@@ -365,6 +371,14 @@ def _change_noise_u8(prev, cur, nxt, iterations: int) -> float:
     if n == 0:
         return float("nan")
     h = np.bincount((c2 + 510).ravel(), minlength=1021).astype(np.float64)
+    return _change_noise_of_histogram(h, n, iterations)
+
+
+def _change_noise_of_histogram(h: np.ndarray, n: int, iterations: int) -> float:
+    """:func:`_change_noise_u8` from the (1021,) float histogram ``h`` of its ``n`` samples
+    2 I_n - I_{n-1} - I_{n+1} + 510."""
+    if n == 0:
+        return float("nan")
     vals = 0.5 * (np.arange(1021, dtype=np.float64) - 510.0)
     cum = np.cumsum(h)
     lo, hi = np.searchsorted(cum, [(n - 1) // 2 + 1, n // 2 + 1])

@@ -677,8 +677,11 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
 
     Parameters
     ----------
-    spike : (M, N) float32 array
-        min(I_n - I_{n-1}, I_n - I_{n+1}) [gray levels] (see :func:`change_images`).
+    spike : (M, N) float32 array, or (prev, cur, nxt)
+        min(I_n - I_{n-1}, I_n - I_{n+1}) [gray levels] (see :func:`change_images`),
+        or the three frames it is taken of (:func:`spike_image`; the 8-bit frames of a
+        linear camera are then summed along the fall in one compiled pass, the same
+        integers).
     c : float
         Detection threshold [gray levels] (the profile's ``detection_threshold_dn``).
     smooth_px : int
@@ -717,6 +720,16 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
 
     if not (c > 0 and math.isfinite(c)):
         raise ValueError(f"detection threshold c must be a positive number of gray levels, got {c!r}")
+    if isinstance(spike, tuple):
+        n_s = int(smooth_px)
+        if (_kernels.AVAILABLE and abs(slope) < 0.05 and 1 < n_s <= 64 and spike[1].shape[0] > n_s
+                and all(f.dtype == np.uint8 for f in spike)):
+            # the same integer sums in one compiled pass over the three frames
+            mask, low = _kernels.spike_masks(*spike, n_s, float(c) * n_s,
+                                             float(c * grow) * n_s if grow < 1.0 else None)
+            return _label_and_merge(mask, low, min_pixels=min_pixels, merge_gap_px=merge_gap_px, slope=slope,
+                                    grow_rows=grow_rows)
+        spike = spike_image(*spike)
     if spike.dtype == np.int16 and abs(slope) < 0.05 and 0 < smooth_px <= 64:
         # exact integer box sum (|spike| <= 255): compare the sum with n c
         n_s = max(int(smooth_px), 1)
@@ -744,14 +757,27 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
             s = cv2.filter2D(spike, -1, fall_kernel(int(smooth_px), slope), borderType=cv2.BORDER_REFLECT)
         mask = cv2.compare(s, float(c), cv2.CMP_GE)
         low = cv2.compare(s, float(c * grow), cv2.CMP_GE) if grow < 1.0 else None
+    return _label_and_merge(mask, low, min_pixels=min_pixels, merge_gap_px=merge_gap_px, slope=slope,
+                            grow_rows=grow_rows)
+
+
+def _label_and_merge(mask, low, *, min_pixels, merge_gap_px, slope, grow_rows):
+    """:func:`detect_streaks` from its masks on: the hysteresis growth (with ``low``), the
+    labelling, the small components' area set to 0, and the merge of collinear pieces."""
+    import cv2
+
     if low is not None:
         reach = cv2.dilate(mask, np.ones((2 * int(grow_rows) + 1, 1), np.uint8))
         mask = cv2.bitwise_or(mask, cv2.bitwise_and(low, reach))
-    # 16-bit labels halve the labelling's cost; safe while there are fewer pixels than labels
-    ltype = cv2.CV_16U if cv2.countNonZero(mask) < 65000 else cv2.CV_32S
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8, ltype=ltype)
-    stats = stats[:, :5].copy()
-    stats[0] = 0
+    if _kernels.AVAILABLE:
+        # the same labels from the mask's runs (the mask is sparse: a few percent of the frame)
+        labels, stats = _kernels.label_components(mask)[1:]
+    else:
+        # 16-bit labels halve the labelling's cost; safe while there are fewer pixels than labels
+        ltype = cv2.CV_16U if cv2.countNonZero(mask) < 65000 else cv2.CV_32S
+        labels, stats = cv2.connectedComponentsWithStats(mask, connectivity=8, ltype=ltype)[1:3]
+        stats = stats[:, :5].copy()
+        stats[0] = 0
     # components below min_pixels keep their label but get area 0 (never measured);
     # relabelling the whole frame would cost more than the rest of the detection
     stats[stats[:, 4] < min_pixels, 4] = 0
@@ -808,19 +834,22 @@ def _merge_pieces(labels: np.ndarray, stats: np.ndarray, big: np.ndarray, merge_
         return
     sel = np.nonzero(ok)[0]
     sel = sel[np.lexsort((a_i[sel], k_i[sel]))]
-    parent: dict[int, int] = {}
+    if _kernels.AVAILABLE:
+        members, roots = _kernels.union_roots(stats.shape[0], idx[a_i[sel]], idx[b_i[sel]])
+    else:
+        parent: dict[int, int] = {}
 
-    def find(i):
-        parent.setdefault(i, i)
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
+        def find(i):
+            parent.setdefault(i, i)
+            while parent[i] != i:
+                parent[i] = parent[parent[i]]
+                i = parent[i]
+            return i
 
-    for ia, ib in zip(idx[a_i[sel]].tolist(), idx[b_i[sel]].tolist()):
-        parent[find(ib)] = find(ia)
-    members = np.fromiter(parent.keys(), dtype=np.int64, count=len(parent))
-    roots = np.fromiter((find(i) for i in members.tolist()), dtype=np.int64, count=members.size)
+        for ia, ib in zip(idx[a_i[sel]].tolist(), idx[b_i[sel]].tolist()):
+            parent[find(ib)] = find(ia)
+        members = np.fromiter(parent.keys(), dtype=np.int64, count=len(parent))
+        roots = np.fromiter((find(i) for i in members.tolist()), dtype=np.int64, count=members.size)
     # every member of ``parent`` belongs to a group of at least two pieces
     remap = np.arange(stats.shape[0], dtype=labels.dtype)
     remap[members] = roots
@@ -1595,13 +1624,14 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     ----------
     change : (M, N) float32 array, or (prev, cur, nxt)
         I_n - (I_{n-1} + I_{n+1}) / 2 [gray levels], or the three linearised frames
-        (the change is then computed only under the streaks).
+        (the change is then computed only under the streaks; float32, or the uint8 frames
+        of a linear camera, read as the same numbers).
     labels, stats : from :func:`detect_streaks`.
     select : (K,) int array
         Labels to measure.
     valid : (n + 1,) bool array, optional
         Which labels are streaks (masked out of each other's measurement).
-    cur, prev : (M, N) float32 arrays, optional
+    cur, prev : (M, N) float32 (or a linear camera's uint8) arrays, optional
         Frames n and n-1: mean background under each streak and the photometric slope of Eq. (18).
     contrast : (float, float), optional
         (E_r, C_ref): divide the change by the local contrast E_r - I_b and scale to C_ref

@@ -107,7 +107,8 @@ def background_histogram(frame, *, step: int = 8, n_bins: int = 64) -> np.ndarra
     Parameters
     ----------
     frame : (M, N) array
-        Linearised frame [gray levels] (a neighbour of the analysed one: no streaks of its own there).
+        Linearised frame [gray levels] (a neighbour of the analysed one: no streaks of its own there),
+        or the 8-bit frame of a linear camera.
     step : int
         Sub-sampling [px].
     n_bins : int
@@ -118,6 +119,9 @@ def background_histogram(frame, *, step: int = 8, n_bins: int = 64) -> np.ndarra
     (n_bins,) int ndarray
     """
     sub = np.asarray(frame)[::step, ::step].ravel()
+    if sub.dtype.kind in "ui":
+        # the 8-bit codes of a linear camera, as linearised
+        sub = sub.astype(np.float32)
     k = np.clip((sub / BACKGROUND_BIN_DN).astype(np.int64), 0, n_bins - 1)
     return np.bincount(k, minlength=n_bins)
 
