@@ -595,28 +595,14 @@ def test_compiled_union_find_equals_the_dict_form():
     """The compiled union-find of the merge of pieces gives the members and roots of the
     dict-based one (each pair's second set under its first's root, pairs in order)."""
     from raingauge.gauge import _kernels
-
-    def by_dict(first, second):
-        parent = {}
-
-        def find(i):
-            parent.setdefault(i, i)
-            while parent[i] != i:
-                parent[i] = parent[parent[i]]
-                i = parent[i]
-            return i
-
-        for ia, ib in zip(first.tolist(), second.tolist()):
-            parent[find(ib)] = find(ia)
-        members = np.fromiter(parent.keys(), dtype=np.int64, count=len(parent))
-        return members, np.array([find(i) for i in members.tolist()], dtype=np.int64)
+    from raingauge.gauge.streaks import union_roots_dict
 
     rng = np.random.default_rng(6)
     for _ in range(300):
         n = int(rng.integers(2, 60))
         first, second = rng.integers(0, n, (2, int(rng.integers(0, 80))))
         members, roots = _kernels.union_roots(n, first, second)
-        expect = by_dict(first, second)
+        expect = union_roots_dict(first, second)
         np.testing.assert_array_equal(members, expect[0])
         np.testing.assert_array_equal(roots, expect[1])
 

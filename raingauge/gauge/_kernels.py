@@ -533,6 +533,23 @@ def profile_pass(change, labels, valid, own, *, margin_px, sigma_min, cur, contr
 
 
 @_jit
+def _scan_run(mask, y, x0, x1, start, n, xs, xe):
+    """Columns x0..x1-1 of row y of :func:`_runs`: a run begins at the first nonzero pixel
+    after a zero one (``start``, -1 outside a run) and ends, recorded as run n, before the
+    next zero one.  Returns the updated (start, n)."""
+    for x in range(x0, x1):
+        if mask[y, x] != 0:
+            if start < 0:
+                start = x
+        elif start >= 0:
+            xs[n] = start
+            xe[n] = x - 1
+            n += 1
+            start = -1
+    return start, n
+
+
+@_jit
 def _runs(mask, words, use_words):
     """The runs of nonzero pixels of ``mask`` row by row: (row start index (M + 1,), first
     column, last column (inclusive)) of each run, in raster order.  Zero 8-pixel words of
@@ -557,24 +574,8 @@ def _runs(mask, words, use_words):
                     n += 1
                     start = -1
                 continue
-            for x in range(8 * wi, 8 * wi + 8):
-                if mask[y, x] != 0:
-                    if start < 0:
-                        start = x
-                elif start >= 0:
-                    xs[n] = start
-                    xe[n] = x - 1
-                    n += 1
-                    start = -1
-        for x in range(8 * nw, N):
-            if mask[y, x] != 0:
-                if start < 0:
-                    start = x
-            elif start >= 0:
-                xs[n] = start
-                xe[n] = x - 1
-                n += 1
-                start = -1
+            start, n = _scan_run(mask, y, 8 * wi, 8 * wi + 8, start, n, xs, xe)
+        start, n = _scan_run(mask, y, 8 * nw, N, start, n, xs, xe)
         if start >= 0:
             xs[n] = start
             xe[n] = N - 1

@@ -788,6 +788,26 @@ def _label_and_merge(mask, low, *, min_pixels, merge_gap_px, slope, grow_rows):
     return labels, stats
 
 
+def union_roots_dict(first, second) -> tuple[np.ndarray, np.ndarray]:
+    """Union of the pairs (first[k], second[k]), in order, each second's set put under its
+    first's root (path halving): the members (in order of first appearance) and the root
+    of each.  The reference form of :func:`raingauge.gauge._kernels.union_roots`."""
+    parent: dict[int, int] = {}
+
+    def find(i):
+        parent.setdefault(i, i)
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for ia, ib in zip(np.asarray(first).tolist(), np.asarray(second).tolist()):
+        parent[find(ib)] = find(ia)
+    members = np.fromiter(parent.keys(), dtype=np.int64, count=len(parent))
+    roots = np.fromiter((find(i) for i in members.tolist()), dtype=np.int64, count=members.size)
+    return members, roots
+
+
 def _merge_pieces(labels: np.ndarray, stats: np.ndarray, big: np.ndarray, merge_gap_px: float, *,
                   slope: float = 0.0) -> None:
     """Merge collinear pieces of one streak in place (labels and stats).
@@ -837,19 +857,7 @@ def _merge_pieces(labels: np.ndarray, stats: np.ndarray, big: np.ndarray, merge_
     if _kernels.AVAILABLE:
         members, roots = _kernels.union_roots(stats.shape[0], idx[a_i[sel]], idx[b_i[sel]])
     else:
-        parent: dict[int, int] = {}
-
-        def find(i):
-            parent.setdefault(i, i)
-            while parent[i] != i:
-                parent[i] = parent[parent[i]]
-                i = parent[i]
-            return i
-
-        for ia, ib in zip(idx[a_i[sel]].tolist(), idx[b_i[sel]].tolist()):
-            parent[find(ib)] = find(ia)
-        members = np.fromiter(parent.keys(), dtype=np.int64, count=len(parent))
-        roots = np.fromiter((find(i) for i in members.tolist()), dtype=np.int64, count=members.size)
+        members, roots = union_roots_dict(idx[a_i[sel]], idx[b_i[sel]])
     # every member of ``parent`` belongs to a group of at least two pieces
     remap = np.arange(stats.shape[0], dtype=labels.dtype)
     remap[members] = roots
