@@ -13,9 +13,25 @@ The probe measures the bias where it happens.  In every few analysed frames it r
 artificial streaks of drops of known radius and depth (the uniform capsule of Eqs. 15-17
 with the blur circle of Eq. 23, at the drop brightness E_r the gauge estimated, falling
 at the velocity law's speed along the rain's measured direction) into copies of crops of
-the frame, clear of the streaks already there, runs them through the frame's own
-detection, measurement, tests and sizing, and compares what the gauge makes of them with
-what they are.  Each injected drop i (radius a_i, depth z_i drawn uniformly over the
+the frame, placed anywhere, runs them through the frame's own detection, measurement,
+tests and sizing, and compares what the gauge makes of them with what they are.
+
+Where frame n's rain was detected, the copy of frame n is first wiped of it (the detected
+pixels and their neighbours, where a drop would touch the streak and merge with it): they
+take the mean of frames n-1 and n+1 there, which the three-frame test found free of rain,
+plus Gaussian noise of 1.5 sigma^2, so that the differences n - (n-1) and n - (n+1) keep
+the variance 2 sigma^2 and the covariance sigma^2 of three independent noisy frames.  A
+drop placed there then meets what a real drop of frame n meets: the neighbour frames as
+they are, free of rain.  Placing the drops only where nothing was detected instead, as
+clear of the real streaks, biases the probe: the places where frame n shows no streak
+are those where frame n had no drop or where a drop of frame n-1 or n+1 hid it, so they
+hide drops more often than the frame does on the whole (in heavy, noisy rain over a
+bright sky the probe then finds its drops at half the rate the real ones are found, and
+the gauge reads 1.5 times the rain).  The merges with the streaks wiped out are the
+overlap correction's (:meth:`raingauge.gauge.RainGauge` counts the isolated drops up by
+the chance of a merge), not the probe's.
+
+Each injected drop i (radius a_i, depth z_i drawn uniformly over the
 span Z_i where it can pass at all, :meth:`SampleVolume.depth_span`) stands for the
 volume (z_i / f)^2 Z_i per pixel of image; the gauge turns it, when counted, into
 (2 a_m)^3 v_m / kappa(a_m) (its own a, v and kappa), so per radius class
@@ -45,8 +61,9 @@ CLASS_EDGES_M = np.array([0.15e-3, 0.25e-3, 0.4e-3, 0.6e-3, 0.9e-3, 1.4e-3, 2.8e
 #: the measurement's flanks and the edge margin fit in it).
 CROP_MARGIN_PX = 12
 
-#: Clear space around an injected streak, free of the frame's detected streaks [px].
-CLEARANCE_PX = 3
+#: Reach of the wiping of frame n's detected streaks around their pixels [px]: the
+#: neighbours a drop touches when it merges with the streak (the overlap correction's).
+ERASE_REACH_PX = 1
 
 #: Bounds of the correction factor [-].
 CORRECTION_RANGE = (0.1, 10.0)
@@ -102,17 +119,14 @@ class CompletenessProbe:
         self._cache = None
 
     # ------------------------------------------------------------------ injection
-    def plan(self, shape, occupied: np.ndarray, slope: float, *, drift_m_s: float | None = None) -> list[dict]:
+    def plan(self, shape, slope: float, *, drift_m_s: float | None = None) -> list[dict]:
         """Drops to inject into a frame of ``shape``: radius, depth, streak end points in the
-        frame and the crop around each, placed where ``occupied`` (the frame's detected
-        streaks, bool (M, N)) leaves the streak and :data:`CLEARANCE_PX` around it clear
-        (the crop's margins may hold other streaks, as a real drop's surroundings do; crops
-        are copied apart, so they may overlap).
+        frame and the crop around each, placed uniformly over the frame (crops are copied
+        apart, so they may overlap; :meth:`canvas` wipes the frame's detected rain out of them).
 
         Parameters
         ----------
         shape : (int, int)
-        occupied : (M, N) bool array, or anything that slices like one
         slope : float
             The rain's direction dx/dy in the image [-] (when ``drift_m_s`` is not given).
         drift_m_s : float, optional
@@ -150,20 +164,12 @@ class CompletenessProbe:
         out = []
         for i in np.flatnonzero(ok):
             chi, cwi = int(ch[i]), int(cw[i])
-            # the streak and its clearance, relative to the crop's corner
-            hx = 0.5 * abs(dx[i]) + r[i] + CLEARANCE_PX
-            hy = 0.5 * L[i] + r[i] + CLEARANCE_PX
-            for _try in range(8):
-                y0 = int(self._rng.integers(1, M - chi))
-                x0 = int(self._rng.integers(1, N - cwi))
-                # streak centre near the crop's centre, at a random place within the pixel
-                # (the measured width depends on it)
-                xc = x0 + 0.5 * (cwi - 1) + float(self._rng.uniform(-0.5, 0.5))
-                yc = y0 + 0.5 * (chi - 1) + float(self._rng.uniform(-0.5, 0.5))
-                if not occupied[max(int(yc - hy), 0):int(yc + hy) + 1, max(int(xc - hx), 0):int(xc + hx) + 1].any():
-                    break
-            else:
-                continue
+            y0 = int(self._rng.integers(1, M - chi))
+            x0 = int(self._rng.integers(1, N - cwi))
+            # streak centre near the crop's centre, at a random place within the pixel
+            # (the measured width depends on it)
+            xc = x0 + 0.5 * (cwi - 1) + float(self._rng.uniform(-0.5, 0.5))
+            yc = y0 + 0.5 * (chi - 1) + float(self._rng.uniform(-0.5, 0.5))
             out.append({"class": int(k[i]), "radius_m": float(a[i]), "depth_m": float(z[i]),
                         "span_m": float(far[i] - near[i]), "velocity_m_s": float(v[i]), "box": (x0, y0, cwi, chi),
                         "p0": (xc - 0.5 * dx[i], yc - 0.5 * L[i]), "p1": (xc + 0.5 * dx[i], yc + 0.5 * L[i]),
@@ -171,9 +177,11 @@ class CompletenessProbe:
                         "centre": (xc, yc), "motion_px": float(L[i])})
         return out
 
-    def canvas(self, frames, plan: list[dict], drop_brightness_dn: float, *, raws=None, delinearize=None):
-        """The crops of ``plan`` from frames n-1, n, n+1 side by side, the artificial streaks
-        added to frame n's crops (Eq. 17: I = I_b + beta (E_r - I_b)).
+    def canvas(self, frames, plan: list[dict], drop_brightness_dn: float, *, raws=None, delinearize=None,
+               occupied=None, noise_dn: float = 0.0):
+        """The crops of ``plan`` from frames n-1, n, n+1 side by side, frame n's detected rain
+        wiped out of its crops (module docstring) and the artificial streaks added to them
+        (Eq. 17: I = I_b + beta (E_r - I_b)).
 
         Parameters
         ----------
@@ -186,6 +194,11 @@ class CompletenessProbe:
             n's quantised after the streaks were added.
         delinearize : callable, optional
             Linear -> 8-bit codes (with ``raws``).
+        occupied : (M, N) bool array, or anything that slices like one, optional
+            Frame n's detected streaks: wiped out of frame n's crops, with
+            :data:`ERASE_REACH_PX` around them.
+        noise_dn : float
+            The frames' noise sigma [gray levels] (linear), for the wiped pixels.
 
         Returns
         -------
@@ -208,6 +221,8 @@ class CompletenessProbe:
                 lin[i][:ch, x:x + cw] = frames[i][y0:y0 + ch, x0:x0 + cw]
                 if raw is not None:
                     raw[i][:ch, x:x + cw] = raws[i][y0:y0 + ch, x0:x0 + cw]
+            if occupied is not None:
+                self._wipe(lin, (slice(0, ch), slice(x, x + cw)), occupied[y0:y0 + ch, x0:x0 + cw], noise_dn)
             ox, oy = x - x0, -y0
             p0.append((p["p0"][0] + ox, p["p0"][1] + oy))
             p1.append((p["p1"][0] + ox, p["p1"][1] + oy))
@@ -220,6 +235,19 @@ class CompletenessProbe:
             raw[1] = delinearize(lin[1])
             lin[1] = raw[1].astype(np.float32)
         return tuple(lin), (None if raw is None else tuple(raw)), centres
+
+    def _wipe(self, lin, where, occupied, noise_dn: float) -> None:
+        """Frame n's detected streaks (``occupied``, bool) and :data:`ERASE_REACH_PX` around
+        them out of ``lin[1][where]``: the mean of frames n-1 and n+1 plus noise of variance
+        1.5 noise_dn^2 (module docstring)."""
+        import cv2
+
+        k = 2 * ERASE_REACH_PX + 1
+        m = cv2.dilate(np.asarray(occupied, dtype=np.uint8), np.ones((k, k), np.uint8)).astype(bool)
+        if not m.any():
+            return
+        bg = 0.5 * (lin[0][where][m] + lin[2][where][m])
+        lin[1][where][m] = bg + self._rng.normal(0.0, math.sqrt(1.5) * float(noise_dn), bg.size)
 
     def due(self, frame_index: int) -> bool:
         """Whether the frame of this index is probed."""

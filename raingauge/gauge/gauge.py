@@ -821,7 +821,7 @@ class RainGauge:
         self._pending.append((entry, prepared))
         self._last_t = t
         if probing:
-            # clear of the streaks already there (not of single noise pixels)
+            # the streaks the probe wipes out of its copies of frame n (not single noise pixels)
             long_ = stats[:, 3] >= 6
             long_[0] = False
             self._run_probe((prev, cur, nxt), raws if u8 else None, _LabelMask(labels, long_), slope, vol, t,
@@ -877,11 +877,11 @@ class RainGauge:
             drift = float(np.median(self._law_drifts))
         else:
             drift = None
-        plan = probe.plan(prof.shape, occupied, slope, drift_m_s=drift)
+        plan = probe.plan(prof.shape, slope, drift_m_s=drift)
         if not plan:
             return
         lin, raw, centres = probe.canvas(frames, plan, min(e_r, self._white_dn), raws=raws,
-                                         delinearize=prof.delinearize)
+                                         delinearize=prof.delinearize, occupied=occupied, noise_dn=noise_dn)
         spike = tuple(raw) if raw is not None else spike_image(*lin)
         lab_c, st_c = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope, grow=vol.grow)
         weights = self.volume.histogram_weights(hist, min(e_r, self._white_dn))
@@ -914,8 +914,8 @@ class RainGauge:
                                               contrast=contrast, probe=True)
             cx = np.array([c[0] for c in centres])
             cy = np.array([c[1] for c in centres])
-            # a streak measured of an injected drop lies on it (other streaks in the crop's
-            # margins are at least the clearance away across)
+            # a streak measured of an injected drop lies on it (frame n's detected streaks
+            # were wiped out of the crops)
             reach_y = np.array([0.25 * p["motion_px"] + 2.0 for p in plan])
             reach_x = np.array([p["radius_px"] + 2.0 + 0.25 * abs(p["p1"][0] - p["p0"][0]) for p in plan])
             for c in prepared:
