@@ -28,7 +28,7 @@ are those where frame n had no drop or where a drop of frame n-1 or n+1 hid it, 
 hide drops more often than the frame does on the whole (in heavy, noisy rain over a
 bright sky the probe then finds its drops at half the rate the real ones are found, and
 the gauge reads 1.5 times the rain).  The merges with the streaks wiped out are the
-overlap correction's (:meth:`raingauge.gauge.RainGauge` counts the isolated drops up by
+overlap correction's (:class:`raingauge.gauge.RainGauge` counts the isolated drops up by
 the chance of a merge), not the probe's.
 
 Each injected drop i (radius a_i, depth z_i drawn uniformly over the
