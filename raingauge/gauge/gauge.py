@@ -110,6 +110,7 @@ from raingauge.gauge.streaks import (
     fit_batch,
     measure_streak_table,
     spike_image,
+    wind_slopes,
 )
 from raingauge.gauge.volume import (
     BRIGHTNESS_PERCENTILE,
@@ -121,6 +122,7 @@ from raingauge.gauge.volume import (
     effective_area_rate_px2_s,
     whole_streak_area_px2,
 )
+from raingauge.physics.drops import FALL_VELOCITY_RANGES_M
 
 __all__ = ["RainGauge", "RECORD_KEYS", "QUALITY_FLAGS", "merge_probability"]
 
@@ -763,12 +765,13 @@ class RainGauge:
         flags = self._frame_flags(raw, cur, neighbour_change, gap)
         slope = self._rain_slope()
         self._frame_slope = slope
+        self._frame_slopes = self._detection_slopes(slope)
         # hysteresis only where the drops' contrast is low (their streaks pass c in patches)
         # and the scene is still (moving texture would grow into streaks)
         grow_here = "low_contrast" in flags and "scene_motion" not in flags
         vol = self.volume if grow_here else self._volume_still
         labels, stats = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope,
-                                       grow=vol.grow)
+                                       slopes=self._frame_slopes, grow=vol.grow)
         rejected = 0
         counted = []
         ref_bg = None
@@ -847,6 +850,16 @@ class RainGauge:
             return s if abs(s) >= 0.05 else 0.0
         return 0.0
 
+    def _detection_slopes(self, slope: float):
+        """The directions the detection smooths along besides ``slope`` [px/px]: in a cross
+        wind those of :func:`raingauge.gauge.streaks.wind_slopes` for the drift the sample
+        volume is taken at, so each drop size is smoothed along about its own slant
+        u / v(a) (the sample volume's detection assumes it is); None with no wind."""
+        wind = self._wind_m_s()
+        if wind == 0.0:
+            return None
+        return wind_slopes(wind, self.volume.rain_velocity_model or self.volume.velocity_model)
+
     def _wind_m_s(self) -> float:
         """The drops' drift across the image [m/s] the sample volume is taken at
         (:meth:`raingauge.gauge.volume.SampleVolume.wind_dimming`): the median of the last
@@ -883,7 +896,8 @@ class RainGauge:
         lin, raw, centres = probe.canvas(frames, plan, min(e_r, self._white_dn), raws=raws,
                                          delinearize=prof.delinearize, occupied=occupied, noise_dn=noise_dn)
         spike = tuple(raw) if raw is not None else spike_image(*lin)
-        lab_c, st_c = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope, grow=vol.grow)
+        lab_c, st_c = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope,
+                                     slopes=self._frame_slopes, grow=vol.grow)
         weights = self.volume.histogram_weights(hist, min(e_r, self._white_dn))
         wind = self._wind_m_s()
         floor = self._kappa_floor(weights, vol, wind)
@@ -977,6 +991,9 @@ class RainGauge:
         motion = h - width - (self.smooth_px - 1)
         ok = whole & (h >= 6) & (motion > 1) & (area > 0)
         a = width * prof.focus_distance_m / (2 * prof.focal_length_px)
+        # (the box reads wide: a streak of the largest drops may look larger than the law
+        # reaches; its measurement, not this estimate, decides)
+        a = np.minimum(a, 0.5 * FALL_VELOCITY_RANGES_M.get(self.velocity_model, (0.0, np.inf))[1])
         v = np.maximum(motion, 1e-3) * prof.focus_distance_m / (prof.focal_length_px * prof.exposure_s)
         r = velocity_log_ratio(a, v, model=self.velocity_model)
         # the box estimates read wide (threshold halo, slant): accepted drops lie within

@@ -670,8 +670,29 @@ def fall_kernel(length_px: int, slope: float = 0.0) -> np.ndarray:
     return k / k.sum()
 
 
+#: Largest step between the directions :func:`wind_slopes` smooths along [px/px]: over the
+#: +-2 rows of a 5-row smoothing the streak then strays at most 0.25 px off one of them.
+WIND_SLOPE_STEP = 0.25
+
+
+def wind_slopes(drift_m_s: float, velocity_model: str = "gunn_kinzer", *,
+                diameters_mm=(0.5, 5.0), step: float = WIND_SLOPE_STEP) -> list[float]:
+    """Directions dx/dy [px/px] that cover the slants u / v(D) of drops of the
+    ``diameters_mm`` range falling at v(D) through a cross wind u = ``drift_m_s``,
+    at most ``step`` apart (:func:`detect_streaks`'s ``slopes``)."""
+    from raingauge.physics.drops import fall_velocity
+
+    u = float(drift_m_s)
+    if not (math.isfinite(u) and u != 0.0):
+        return [0.0]
+    v = np.asarray(fall_velocity(np.asarray(diameters_mm, dtype=float) * 1e-3, model=velocity_model), dtype=float)
+    lo, hi = sorted((u / float(v.max()), u / float(v.min())))
+    n = max(int(math.ceil((hi - lo) / step)), 0)
+    return [float(x) for x in np.linspace(lo, hi, n + 1)]
+
+
 def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min_pixels: int = 6,
-                   merge_gap_px: float = 6.0, slope: float = 0.0,
+                   merge_gap_px: float = 6.0, slope: float = 0.0, slopes=None,
                    grow: float = 1.0, grow_rows: int = 6) -> tuple[np.ndarray, np.ndarray]:
     """Label candidate streaks: Eq. (19) on a change image smoothed along the fall.
 
@@ -697,6 +718,12 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
     slope : float
         Direction of the fall in the image, dx/dy [px/px] (wind slants the
         streaks); the smoothing follows it.
+    slopes : sequence of float, optional
+        More directions of the fall [px/px]: the change is smoothed along each of them
+        and along ``slope``, and the largest of the smoothed changes is thresholded.
+        In a cross wind u each drop size slants by its own u / v(a) (the small, slow
+        drops most): smoothed along another direction, a thin streak's change is
+        spread off it and a faint one is lost (:func:`wind_slopes`).
     grow : float
         Hysteresis: a streak also takes the pixels of the smoothed spike at or above
         ``grow`` c within ``grow_rows`` of one of its pixels at c in the same column
@@ -720,9 +747,10 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
 
     if not (c > 0 and math.isfinite(c)):
         raise ValueError(f"detection threshold c must be a positive number of gray levels, got {c!r}")
+    extra = [float(v) for v in (slopes or ()) if abs(float(v) - slope) >= 0.05]
     if isinstance(spike, tuple):
         n_s = int(smooth_px)
-        if (_kernels.AVAILABLE and abs(slope) < 0.05 and 1 < n_s <= 64 and spike[1].shape[0] > n_s
+        if (_kernels.AVAILABLE and abs(slope) < 0.05 and not extra and 1 < n_s <= 64 and spike[1].shape[0] > n_s
                 and all(f.dtype == np.uint8 for f in spike)):
             # the same integer sums in one compiled pass over the three frames
             mask, low = _kernels.spike_masks(*spike, n_s, float(c) * n_s,
@@ -730,7 +758,7 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
             return _label_and_merge(mask, low, min_pixels=min_pixels, merge_gap_px=merge_gap_px, slope=slope,
                                     grow_rows=grow_rows)
         spike = spike_image(*spike)
-    if spike.dtype == np.int16 and abs(slope) < 0.05 and 0 < smooth_px <= 64:
+    if spike.dtype == np.int16 and abs(slope) < 0.05 and not extra and 0 < smooth_px <= 64:
         # exact integer box sum (|spike| <= 255): compare the sum with n c
         n_s = max(int(smooth_px), 1)
         if n_s > 1 and spike.shape[0] > n_s:
@@ -755,6 +783,10 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
             s = cv2.blur(spike, (1, int(smooth_px)))
         else:
             s = cv2.filter2D(spike, -1, fall_kernel(int(smooth_px), slope), borderType=cv2.BORDER_REFLECT)
+        if smooth_px > 1:
+            for other in extra:
+                s = cv2.max(s, cv2.filter2D(spike, -1, fall_kernel(int(smooth_px), other),
+                                            borderType=cv2.BORDER_REFLECT))
         mask = cv2.compare(s, float(c), cv2.CMP_GE)
         low = cv2.compare(s, float(c * grow), cv2.CMP_GE) if grow < 1.0 else None
     return _label_and_merge(mask, low, min_pixels=min_pixels, merge_gap_px=merge_gap_px, slope=slope,
