@@ -122,7 +122,6 @@ from raingauge.gauge.volume import (
     effective_area_rate_px2_s,
     whole_streak_area_px2,
 )
-from raingauge.physics.drops import FALL_VELOCITY_RANGES_M
 
 __all__ = ["RainGauge", "RECORD_KEYS", "QUALITY_FLAGS", "merge_probability"]
 
@@ -991,9 +990,6 @@ class RainGauge:
         motion = h - width - (self.smooth_px - 1)
         ok = whole & (h >= 6) & (motion > 1) & (area > 0)
         a = width * prof.focus_distance_m / (2 * prof.focal_length_px)
-        # (the box reads wide: a streak of the largest drops may look larger than the law
-        # reaches; its measurement, not this estimate, decides)
-        a = np.minimum(a, 0.5 * FALL_VELOCITY_RANGES_M.get(self.velocity_model, (0.0, np.inf))[1])
         v = np.maximum(motion, 1e-3) * prof.focus_distance_m / (prof.focal_length_px * prof.exposure_s)
         r = velocity_log_ratio(a, v, model=self.velocity_model)
         # the box estimates read wide (threshold halo, slant): accepted drops lie within
