@@ -379,3 +379,25 @@ def test_probe_is_deterministic_and_optional():
     with pytest.raises(ValueError, match="per_frame"):
         CompletenessProbe(CAM, g.volume, "gunn_kinzer", per_frame=0)
     assert math.isfinite(out[0])
+
+
+def test_class_counts_are_the_counted_drops_against_the_models_expectation(volume):
+    """Drops of one class counted with a chance of 0.3 where the model says 0.6: the
+    count-based completeness counted / expected is 0.5 in it, 1 in the others."""
+    rng = np.random.default_rng(8)
+    probe = _probe(volume, per_frame=16, min_injections=100, history=20000)
+    injected, counted, expected = probe.class_counts()
+    assert injected.sum() == 0 and counted.sum() == 0 and expected.sum() == 0
+    while probe.injected < 6000:
+        plan = probe.plan(CAM.shape, slope=0.0)
+        cls = np.array([p["class"] for p in plan])
+        chance = np.where(cls == 3, 0.3, 0.6)
+        est = (rng.random(len(plan)) < chance).astype(float)
+        probe.record(plan, est, np.ones(len(plan)), np.full(len(plan), 0.6))
+    injected, counted, expected = probe.class_counts()
+    assert injected.sum() == probe.injected and counted.sum() == probe.passed
+    live = injected > 0
+    assert live[3] and live.sum() >= 3
+    ratio = counted[live] / expected[live]
+    want = np.where(np.arange(injected.size)[live] == 3, 0.5, 1.0)
+    np.testing.assert_allclose(ratio, want, atol=0.12)

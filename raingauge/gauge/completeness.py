@@ -307,6 +307,22 @@ class CompletenessProbe:
         ratio = np.where((n > 0) & (expected > 0), ratio, np.where(n > 0, pooled, np.nan))
         return ratio, n
 
+    def class_counts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(injected, counted, expected) per radius class: the drops injected, those the gauge
+        counted, and the sum of the model's pass probabilities p(a, z, C, sigma) over them
+        (what the model expects it to count) [-].  counted / expected is the count-based
+        completeness of the class, beside the rate-based :meth:`class_ratios`."""
+        n_cls = CLASS_EDGES_M.size - 1
+        if not self._log:
+            z = np.zeros(n_cls)
+            return z.astype(int), z.astype(int), z
+        arr = np.asarray(self._log, dtype=float)
+        cls = arr[:, 0].astype(int)
+        injected = np.bincount(cls, minlength=n_cls)
+        counted = np.bincount(cls, (arr[:, 1] > 0).astype(float), minlength=n_cls).astype(int)
+        expected = np.bincount(cls, arr[:, 3], minlength=n_cls)
+        return injected, counted, expected
+
     def class_relative_sd(self) -> np.ndarray:
         """Relative standard error of each class's ratio (the ratio estimator's,
         sum (x_i - c y_i)^2 / (sum y_i)^2, shrinkage left out); 0 where it cannot be had [-]."""

@@ -1,0 +1,187 @@
+"""Where a clip's rain goes: the gauge's counted drops matched to the simulator's drops.
+
+The accuracy benchmark (``bench_gauge_accuracy.py``) says how far a clip's rate is
+off; this says where.  One clip is rendered with its drops (``truth_drops``) and run
+through the gauge with ``keep_drops``; each counted drop is matched to the drop of
+the same frame whose streak holds its centre (across within the streak's radius and
+3 px, along within a quarter of its length and 3 px; the closest in those units), and
+the script prints
+
+* per band of true diameter: the rain the truth has there, the rain the gauge makes
+  of the drops it matched there (measured size, speed and weight), their ratio, and
+  the median measured / true diameter;
+* per radius class of the completeness probe: the drops the gauge counted against
+  the count the model of the sample volume expects of the clip's drops
+  (sum of p(a, z) over the whole streaks in the depth span, at the frame's contrast
+  weights and noise), beside the same ratio for the probe's injected drops
+  (:meth:`raingauge.gauge.completeness.CompletenessProbe.class_counts`).  Where the
+  two differ, the probe does not see what loses the real drops, and its correction
+  misses it;
+* the rain of counted drops no drop of the clip explains (false detections).
+
+The count ratios carry the matching's own losses (a drop whose streak is cut by the
+frame edge or merged with another is not counted however good the gauge): compare
+them between clips and with the probe's, not with 1.
+
+    python benchmarks/diag_gauge_truth.py --rate 10 --background bright_sky --noise 3
+    python benchmarks/diag_gauge_truth.py --rate 30 --wind 3 --seconds 60
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_gauge_accuracy import BACKGROUNDS  # noqa: E402
+
+#: Bands of true diameter [mm].
+BANDS_MM = (0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0)
+#: Margin a streak keeps from the frame edge to count as whole [px].
+WHOLE_MARGIN_PX = 12
+#: Drops smaller than this are left out of the truth kept per frame (none is counted) [m].
+MIN_RADIUS_M = 0.1e-3
+
+
+def _frame_truth(drops, shape):
+    """The drops of one frame as arrays: radius, depth, streak centre, radius and length [px],
+    and whether the streak is whole in the frame."""
+    p = np.asarray(drops["streak_px"], dtype=float)
+    r = 0.5 * (np.asarray(drops["width_px"], dtype=float) + np.asarray(drops["blur_px"], dtype=float))
+    m, n = shape
+    x0 = np.minimum(p[:, 0, 0], p[:, 1, 0]) - r
+    x1 = np.maximum(p[:, 0, 0], p[:, 1, 0]) + r
+    y0 = np.minimum(p[:, 0, 1], p[:, 1, 1]) - r
+    y1 = np.maximum(p[:, 0, 1], p[:, 1, 1]) + r
+    g = WHOLE_MARGIN_PX
+    a = np.asarray(drops["radius_m"], dtype=float)
+    keep = a >= MIN_RADIUS_M
+    out = {"a": a, "z": np.asarray(drops["depth_m"], dtype=float),
+           "xc": 0.5 * (p[:, 0, 0] + p[:, 1, 0]), "yc": 0.5 * (p[:, 0, 1] + p[:, 1, 1]), "r": r,
+           "length": np.hypot(p[:, 1, 0] - p[:, 0, 0], p[:, 1, 1] - p[:, 0, 1]),
+           "whole": (x0 > g) & (y0 > g) & (x1 < n - g) & (y1 < m - g)}
+    return {key: val[keep] for key, val in out.items()}
+
+
+def match(truth, x, y):
+    """Index of the drop of ``truth`` (:func:`_frame_truth`) whose streak holds (x, y), or -1."""
+    if truth["a"].size == 0:
+        return -1
+    ux = np.abs(truth["xc"] - x) / (truth["r"] + 3.0)
+    uy = np.abs(truth["yc"] - y) / (0.25 * truth["length"] + 3.0)
+    u = np.maximum(ux, uy)
+    j = int(np.argmin(u))
+    return j if u[j] <= 1.0 else -1
+
+
+def run(rate, background, noise, wind, seconds, seed, size):
+    from raingauge.gauge import RainGauge
+    from raingauge.gauge.completeness import CLASS_EDGES_M
+    from raingauge.gauge.volume import background_histogram
+    from raingauge.physics import drops as D
+    from raingauge.profile import default_profile
+    from raingauge.render.simulator import simulate
+
+    w, h = size
+    prof = default_profile().replace(width_px=w, height_px=h, noise_sigma_dn=float(noise))
+    spec, motion, e_r = BACKGROUNDS[background]
+    sim = simulate(prof, seconds=seconds, seed=seed, background=spec, motion=motion, wind_m_s=wind,
+                   drop_brightness_dn=e_r, truth_drops=True, rain_rate_mm_h=rate)
+    g = RainGauge(prof, window_s=seconds, step_s=seconds, keep_drops=True)
+    fps = prof.frame_rate_hz
+    truth = {}
+    recs = []
+    last = None
+    for k, (frame, ft) in enumerate(sim):
+        truth[k] = _frame_truth(ft["drops"], prof.shape)
+        recs += g.process(frame, t_s=k / fps)
+        last = frame
+    recs += g.flush()
+    rec, tr = recs[-1], sim.truth
+    true_rate = float(tr["rain_rate_mm_h"])
+    print(f"{rate} mm/h {background} noise {noise} wind {wind}: gauge {rec['rain_rate_mm_h']:.3f} "
+          f"truth {true_rate:.3f} ratio {rec['rain_rate_mm_h'] / true_rate:.3f}  "
+          f"Dm {rec['dm_mm']} / {tr['windows'][-1]['dm_mm']:.3f}")
+
+    # ---- counted drops against the drops they are
+    found = set()
+    rows = []            # (true radius, measured radius, rain [mm/h]); true radius NaN: unmatched
+    for d in g.drops:
+        k = int(round(d["t"] * fps))
+        contrib = 3.6e6 * math.pi / 6.0 * d["diameter_m"] ** 3 * d["velocity_m_s"] * d["weight_s_m3"] / seconds
+        j = match(truth[k], d["x"], d["y"]) if k in truth else -1
+        if j >= 0:
+            found.add((k, j))
+        rows.append((truth[k]["a"][j] if j >= 0 else math.nan, 0.5 * d["diameter_m"], contrib))
+    rows = np.array(rows, dtype=float).reshape(-1, 3)
+    dmm = np.asarray(D.PARSIVEL_D_CENTRES_MM)
+    nd = np.nan_to_num(np.asarray(tr["windows"][-1]["dsd_n_m3_mm"], dtype=float))
+    v = np.nan_to_num(np.asarray(D.fall_velocity(dmm * 1e-3), dtype=float))
+    true_band = 3.6e6 * math.pi / 6.0 * (dmm * 1e-3) ** 3 * v * nd * np.asarray(D.PARSIVEL_D_WIDTHS_MM)
+    print("\n true D [mm]   truth [mm/h]  gauge [mm/h]  ratio   drops  median D_m/D")
+    for lo, hi in zip(BANDS_MM[:-1], BANDS_MM[1:]):
+        sel = (2e3 * rows[:, 0] >= lo) & (2e3 * rows[:, 0] < hi)
+        t = float(true_band[(dmm >= lo) & (dmm < hi)].sum())
+        got = float(rows[sel, 2].sum())
+        med = float(np.median(rows[sel, 1] / rows[sel, 0])) if sel.any() else math.nan
+        print(f" {lo:4.2f}-{hi:4.2f}   {t:12.3f}  {got:12.3f}  {got / t if t > 0 else math.nan:5.2f}  "
+              f"{int(sel.sum()):6d}  {med:6.3f}")
+    lost = ~np.isfinite(rows[:, 0])
+    print(f" unmatched counted drops: {int(lost.sum())}, {rows[lost, 2].sum():.3f} mm/h "
+          f"({rows[lost, 2].sum() / true_rate:.1%} of the truth)")
+
+    # ---- counts against the model, beside the probe's
+    vol = g.volume
+    e_est = g.drop_brightness_estimate_dn
+    weights = vol.histogram_weights(background_histogram(last), e_est) if np.isfinite(e_est) else None
+    noise_dn = float(noise)
+    n_cls = CLASS_EDGES_M.size - 1
+    counted = np.zeros(n_cls)
+    expected = np.zeros(n_cls)
+    for k, t in truth.items():
+        near, far = vol.depth_span(t["a"])
+        live = t["whole"] & (t["a"] >= CLASS_EDGES_M[0]) & (t["z"] >= near) & (t["z"] <= far)
+        for j in np.flatnonzero(live):
+            c = min(int(np.searchsorted(CLASS_EDGES_M, t["a"][j], side="right")) - 1, n_cls - 1)
+            expected[c] += vol.pass_probability_over(t["a"][j], t["z"][j], weights, noise_dn, wind_m_s=wind) \
+                if weights is not None else 0.0
+            counted[c] += (k, j) in found
+    if g.probe is not None:
+        injected, p_counted, p_expected = g.probe.class_counts()
+    else:
+        injected = p_counted = p_expected = np.zeros(n_cls)
+    print("\n class  a [mm]      real counted/expected         probe counted/expected       real/probe")
+    for c in range(n_cls):
+        # (a ratio on less than one expected drop says nothing)
+        real = counted[c] / expected[c] if expected[c] >= 1.0 else math.nan
+        prb = p_counted[c] / p_expected[c] if p_expected[c] >= 1.0 else math.nan
+        print(f"   {c}   {CLASS_EDGES_M[c] * 1e3:4.2f}-{CLASS_EDGES_M[c + 1] * 1e3:4.2f}  "
+              f"{int(counted[c]):6d} / {expected[c]:8.1f} = {real:5.2f}     "
+              f"{int(p_counted[c]):5d} / {p_expected[c]:7.1f} = {prb:5.2f}        {real / prb:5.2f}")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rate", type=float, default=10.0, help="rain rate [mm/h] (Marshall-Palmer)")
+    ap.add_argument("--background", choices=sorted(BACKGROUNDS), default="bright_sky")
+    ap.add_argument("--noise", type=float, default=3.0, help="sensor noise [gray levels]")
+    ap.add_argument("--wind", type=float, default=0.0, help="wind [m/s]")
+    ap.add_argument("--seconds", type=float, default=60.0)
+    ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--size", default="1280x720", help="frame size WxH [px]")
+    args = ap.parse_args(argv)
+    try:
+        w, h = (int(s) for s in args.size.lower().split("x"))
+    except ValueError:
+        ap.error(f"--size must be WxH, e.g. 1280x720, got {args.size!r}")
+    run(args.rate, args.background, args.noise, args.wind, args.seconds, args.seed, (w, h))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
