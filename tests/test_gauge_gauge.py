@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import json
 
 import numpy as np
@@ -228,6 +230,14 @@ def test_condition_uncertainty_follows_the_validation():
     assert condition_uncertainty(["scene_motion"], 3.0) == pytest.approx(0.40)
     assert condition_uncertainty(["low_contrast", "scene_motion"], 2.0) == pytest.approx(0.255)
     assert condition_uncertainty(["low_contrast"], float("nan")) == pytest.approx(0.40)
+    # a cross wind adds the wind clips' scatter in quadrature, linear in the drift up to the
+    # 3 m/s validated, held beyond; either direction; no wind (or none known) adds nothing
+    assert condition_uncertainty([], 1.0, 3.0) == pytest.approx(math.hypot(0.03, 0.12))
+    assert condition_uncertainty([], 1.0, -1.5) == pytest.approx(math.hypot(0.03, 0.06))
+    assert condition_uncertainty([], 1.0, 8.0) == pytest.approx(math.hypot(0.03, 0.12))
+    assert condition_uncertainty(["low_contrast"], 1.0, 3.0) == pytest.approx(math.hypot(0.11, 0.12))
+    assert condition_uncertainty([], 1.0, 0.0) == pytest.approx(0.03)
+    assert condition_uncertainty([], 1.0, float("nan")) == pytest.approx(0.03)
 
 
 def test_flagged_window_interval_carries_the_condition_uncertainty():
