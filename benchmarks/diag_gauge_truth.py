@@ -3,8 +3,9 @@
 The accuracy benchmark (``bench_gauge_accuracy.py``) says how far a clip's rate is
 off; this says where.  One clip is rendered with its drops (``truth_drops``) and run
 through the gauge with ``keep_drops``; each counted drop is matched to the drop of
-the same frame whose streak holds its centre (across within the streak's radius and
-3 px, along within a quarter of its length and 3 px; the closest in those units), and
+the same frame whose streak holds its centre (across the streak's direction within its
+radius and 3 px, along it within a quarter of its length and 3 px; the closest in those
+units), and
 the script prints
 
 * per band of true diameter: the rain the truth has there, the rain the gauge makes
@@ -12,8 +13,9 @@ the script prints
   the median measured / true diameter;
 * per radius class of the completeness probe: the drops the gauge counted against
   the count the model of the sample volume expects of the clip's drops
-  (sum of p(a, z) over the whole streaks in the depth span, at the frame's contrast
-  weights and noise), beside the same ratio for the probe's injected drops
+  (sum of p(a, z) over the whole streaks in the depth span of the sizes whose sample
+  volume is above the gauge's floor, at the frame's contrast weights and the noise the
+  gauge estimated), beside the same ratio for the probe's injected drops
   (:meth:`raingauge.gauge.completeness.CompletenessProbe.class_counts`).  Where the
   two differ, the probe does not see what loses the real drops, and its correction
   misses it;
@@ -61,9 +63,14 @@ def _frame_truth(drops, shape):
     g = WHOLE_MARGIN_PX
     a = np.asarray(drops["radius_m"], dtype=float)
     keep = a >= MIN_RADIUS_M
+    dx, dy = p[:, 1, 0] - p[:, 0, 0], p[:, 1, 1] - p[:, 0, 1]
+    length = np.hypot(dx, dy)
+    # the streak's direction (straight down for a drop that did not move)
+    ux = np.where(length > 0, dx / np.maximum(length, 1e-12), 0.0)
+    uy = np.where(length > 0, dy / np.maximum(length, 1e-12), 1.0)
     out = {"a": a, "z": np.asarray(drops["depth_m"], dtype=float),
            "xc": 0.5 * (p[:, 0, 0] + p[:, 1, 0]), "yc": 0.5 * (p[:, 0, 1] + p[:, 1, 1]), "r": r,
-           "length": np.hypot(p[:, 1, 0] - p[:, 0, 0], p[:, 1, 1] - p[:, 0, 1]),
+           "length": length, "ux": ux, "uy": uy,
            "whole": (x0 > g) & (y0 > g) & (x1 < n - g) & (y1 < m - g)}
     return {key: val[keep] for key, val in out.items()}
 
@@ -72,9 +79,12 @@ def match(truth, x, y):
     """Index of the drop of ``truth`` (:func:`_frame_truth`) whose streak holds (x, y), or -1."""
     if truth["a"].size == 0:
         return -1
-    ux = np.abs(truth["xc"] - x) / (truth["r"] + 3.0)
-    uy = np.abs(truth["yc"] - y) / (0.25 * truth["length"] + 3.0)
-    u = np.maximum(ux, uy)
+    # offsets along the streak and across it (a slanted streak measured in part has its
+    # centre off the true one along the slant)
+    ex, ey = x - truth["xc"], y - truth["yc"]
+    along = np.abs(ex * truth["ux"] + ey * truth["uy"]) / (0.25 * truth["length"] + 3.0)
+    across = np.abs(-ex * truth["uy"] + ey * truth["ux"]) / (truth["r"] + 3.0)
+    u = np.maximum(along, across)
     j = int(np.argmin(u))
     return j if u[j] <= 1.0 else -1
 
@@ -82,6 +92,7 @@ def match(truth, x, y):
 def run(rate, background, noise, wind, seconds, seed, size):
     from raingauge.gauge import RainGauge
     from raingauge.gauge.completeness import CLASS_EDGES_M
+    from raingauge.gauge.gauge import KAPPA_FLOOR_REL
     from raingauge.gauge.volume import background_histogram
     from raingauge.physics import drops as D
     from raingauge.profile import default_profile
@@ -139,13 +150,20 @@ def run(rate, background, noise, wind, seconds, seed, size):
     vol = g.volume
     e_est = g.drop_brightness_estimate_dn
     weights = vol.histogram_weights(background_histogram(last), e_est) if np.isfinite(e_est) else None
-    noise_dn = float(noise)
+    # the noise the gauge's sample volume is taken at (the sensor's and the faint rain's)
+    noise_dn = g.noise_estimate_dn
+    # sizes whose sample volume is under the gauge's floor are not counted at all (their
+    # rain is not measured): left out of the expectation, as the probe leaves them out
+    grid = np.geomspace(0.05e-3, 5e-3, 120)
+    floor = KAPPA_FLOOR_REL * float(np.nanmax(vol.kappa(grid, weights=weights, noise_dn=noise_dn, wind_m_s=wind))) \
+        if weights is not None else math.inf
     n_cls = CLASS_EDGES_M.size - 1
     counted = np.zeros(n_cls)
     expected = np.zeros(n_cls)
     for k, t in truth.items():
         near, far = vol.depth_span(t["a"])
         live = t["whole"] & (t["a"] >= CLASS_EDGES_M[0]) & (t["z"] >= near) & (t["z"] <= far)
+        live &= vol.kappa(t["a"], weights=weights, noise_dn=noise_dn, wind_m_s=wind) >= floor
         for j in np.flatnonzero(live):
             c = min(int(np.searchsorted(CLASS_EDGES_M, t["a"][j], side="right")) - 1, n_cls - 1)
             expected[c] += vol.pass_probability_over(t["a"][j], t["z"][j], weights, noise_dn, wind_m_s=wind) \

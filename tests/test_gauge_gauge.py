@@ -609,3 +609,19 @@ def test_rain_direction_is_followed_before_the_drop_brightness_is_known():
                 seen.append(g._rain_slope())
         assert len(seen) > 20, "drops were decided before the rain's direction could be followed"
         assert all(lo <= s <= hi for s in seen), seen
+
+
+def test_gauge_estimates_the_frames_noise():
+    """The noise the gauge works with is the frames' own: a rain-free clip with 6 gray levels
+    of sensor noise on a camera that claims 2 reads 6; with 1 on a camera that claims 2 it
+    reads the claimed floor; NaN before the first analysed frame."""
+    from raingauge.render.simulator import render_clip
+
+    for sigma, expect in ((6.0, 6.0), (1.0, 2.0)):
+        cam = CAM.replace(noise_sigma_dn=2.0)
+        frames, _ = render_clip(cam.replace(noise_sigma_dn=sigma), seconds=1.0, rain_rate_mm_h=0.0, seed=4)
+        g = RainGauge(cam)
+        assert np.isnan(g.noise_estimate_dn)
+        for fr in frames:
+            g.process(fr)
+        assert g.noise_estimate_dn == pytest.approx(expect, rel=0.1)

@@ -1301,6 +1301,15 @@ class RainGauge:
         return w_true * float(vol.depth_m(a0)) / (2 * f)
 
     @property
+    def noise_estimate_dn(self) -> float:
+        """The frames' noise the gauge works with now [gray levels]: the median over the
+        recent frames of each frame's change noise over sqrt(1.5) (the sensor's noise and
+        the flicker of rain too faint to detect, Eq. 27; at least the profile's), as the
+        sample volume and the streaks' errors take it; NaN before the first analysed frame."""
+        noise = self._median_noise()
+        return float("nan") if noise is None else noise
+
+    @property
     def drop_brightness_estimate_dn(self) -> float:
         """The drop brightness E_r the gauge works with now [gray levels]: the given one,
         else the estimate from the streaks so far (:func:`drop_brightness_dn`); NaN before
