@@ -147,7 +147,8 @@ def run(rate, background, noise, wind, seconds, seed, size):
           f"({rows[lost, 2].sum() / true_rate:.1%} of the truth)")
 
     # ---- counts against the model, beside the probe's
-    vol = g.volume
+    # the volume of the window's frames (with or without the low-contrast hysteresis)
+    vol = g.sample_volume(rec["quality"])
     e_est = g.drop_brightness_estimate_dn
     weights = vol.histogram_weights(background_histogram(last), e_est) if np.isfinite(e_est) else None
     # the noise the gauge's sample volume is taken at (the sensor's and the faint rain's)

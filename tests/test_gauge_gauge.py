@@ -625,3 +625,13 @@ def test_gauge_estimates_the_frames_noise():
         for fr in frames:
             g.process(fr)
         assert g.noise_estimate_dn == pytest.approx(expect, rel=0.1)
+
+
+def test_sample_volume_follows_the_frames_flags():
+    """Hysteresis (and its sample volume) only in still, low-contrast frames."""
+    g = RainGauge(CAM)
+    assert g.sample_volume(["low_contrast"]) is g.volume
+    for flags in ([], ["scene_motion"], ["low_contrast", "scene_motion"], ["dropped_frames"]):
+        vol = g.sample_volume(flags)
+        assert vol is not g.volume and vol.grow == 1.0
+    assert g.volume.grow < 1.0

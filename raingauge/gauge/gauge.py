@@ -779,10 +779,7 @@ class RainGauge:
         slope = self._rain_slope()
         self._frame_slope = slope
         self._frame_slopes = self._detection_slopes(slope)
-        # hysteresis only where the drops' contrast is low (their streaks pass c in patches)
-        # and the scene is still (moving texture would grow into streaks)
-        grow_here = "low_contrast" in flags and "scene_motion" not in flags
-        vol = self.volume if grow_here else self._volume_still
+        vol = self.sample_volume(flags)
         labels, stats = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope,
                                        slopes=self._frame_slopes, grow=vol.grow)
         rejected = 0
@@ -1299,6 +1296,14 @@ class RainGauge:
         w_true = w_app * math.sqrt(min(q, 1.0))
         a0 = w_true * z0 / (2 * f)
         return w_true * float(vol.depth_m(a0)) / (2 * f)
+
+    def sample_volume(self, flags) -> SampleVolume:
+        """The sample volume a frame with these quality flags is measured in: the detection
+        grows streaks by hysteresis only where the drops' contrast is low (their streaks pass
+        the threshold in patches) and the scene is still (moving texture would grow into
+        streaks), and each detection has its own volume."""
+        grow_here = "low_contrast" in flags and "scene_motion" not in flags
+        return self.volume if grow_here else self._volume_still
 
     @property
     def noise_estimate_dn(self) -> float:
