@@ -401,3 +401,132 @@ def test_class_counts_are_the_counted_drops_against_the_models_expectation(volum
     ratio = counted[live] / expected[live]
     want = np.where(np.arange(injected.size)[live] == 3, 0.5, 1.0)
     np.testing.assert_allclose(ratio, want, atol=0.12)
+
+
+def test_canvas_rounds_a_faint_streak_once_and_keeps_the_pixels_noise(volume):
+    """A linear camera rounds each pixel once.  Frame n's 8-bit copy was rounded already;
+    the canvas draws the value within the code's rounding interval before rounding the
+    streak again, so a faint streak's mean change is its Eq. (17) change (rounded twice it
+    would be a whole number of gray levels at every pixel).  Over a noisy background the
+    streak pixels keep the frame's noise (I_b + beta (E_r - I_b) alone keeps 1 - beta of
+    it)."""
+    M, N = CAM.shape
+    probe = _probe(volume, per_frame=16, seed=4)
+    flat = np.full(CAM.shape, 100.0, np.float32)
+    diff_raw, diff_true = [], []
+    for _ in range(6):
+        plan = probe.plan(CAM.shape, slope=0.0)
+        # the streaks' exact change at E_r = 110 over a flat background: under a gray level
+        exact, _r, _c = probe.canvas((flat, flat, flat), plan, 110.0)
+        change = exact[1] - flat[0, 0]
+        raws = tuple(np.full(CAM.shape, 100, np.uint8) for _ in range(3))
+        lin, raw, _c = probe.canvas((flat, flat, flat), plan, 110.0, raws=raws, delinearize=CAM.delinearize)
+        on = change > 0.05
+        diff_raw.append(raw[1][on].astype(float) - 100.0)
+        diff_true.append(change[on])
+    got, want = np.concatenate(diff_raw), np.concatenate(diff_true)
+    assert got.size > 2000
+    assert 0.3 < want.mean() < 1.2 and abs(np.mean(np.round(want)) - want.mean()) > 0.05
+    assert got.mean() == pytest.approx(want.mean(), abs=0.03)
+    assert np.array_equal(lin[1], raw[1].astype(np.float32))
+
+    # the noise of the pixels under the streak, with beta as large as a slow drop's
+    rng = np.random.default_rng(8)
+    sigma = 3.0
+    bg = np.full(CAM.shape, 60.0, np.float32)
+    res, betas = [], []
+    for _ in range(8):
+        plan = probe.plan(CAM.shape, slope=0.0)
+        for p in plan:
+            p["area_px"] *= 6.0            # beta six times a falling drop's
+        exact, _r, _c = probe.canvas((bg, bg, bg), plan, 200.0)
+        beta = (exact[1] - 60.0) / 140.0
+        noisy = (bg + sigma * rng.standard_normal(CAM.shape)).astype(np.float32)
+        lin, _raw, _c = probe.canvas((noisy, noisy, noisy), plan, 200.0, noise_dn=sigma)
+        on = beta > 0.2
+        res.append((lin[1] - exact[1])[on])
+        betas.append(beta[on])
+    res, betas = np.concatenate(res), np.concatenate(betas)
+    assert res.size > 2000 and np.mean(1 - (1 - betas) ** 2) > 0.3
+    assert np.var(res) == pytest.approx(sigma ** 2, rel=0.08)
+
+
+def test_probe_effort_follows_the_counting_error(volume):
+    """Until mature every frame is probed; then the interval between probed frames scales
+    with (target / probe error)^2, the target half the rest of the rate's error, between
+    ``fastest`` and ``every`` frames."""
+    from raingauge.gauge.completeness import PROBE_SD_SHARE
+
+    probe = _probe(volume, per_frame=16, every=6, fastest=1, min_injections=16)
+    assert probe.interval == 6
+    assert probe.adapt(float("nan"), float("nan")) == 1
+    assert all(probe.due(k) for k in range(5))
+    plan = probe.plan(CAM.shape, slope=0.0)
+    probe.record(plan, np.ones(len(plan)), np.ones(len(plan)), np.full(len(plan), 0.5))
+    assert probe.mature
+    # the probe's error well under the target: probe less often, at most every 6th frame
+    assert probe.adapt(0.005, 0.04) == 6
+    assert probe.due(12) and not probe.due(13)
+    # at the target: stay
+    assert probe.adapt(PROBE_SD_SHARE * 0.04, 0.04) == 6
+    # twice the target: a quarter of the interval
+    assert probe.adapt(2 * PROBE_SD_SHARE * 0.04, 0.04) == 1
+    assert probe.adapt(0.5 * PROBE_SD_SHARE * 0.04, 0.04) == 4
+    # no rate to compare with: unchanged
+    assert probe.adapt(0.01, float("nan")) == 4
+    # at most every 2nd frame by default once mature
+    capped = _probe(volume, per_frame=16, every=6, min_injections=16)
+    plan = capped.plan(CAM.shape, slope=0.0)
+    capped.record(plan, np.ones(len(plan)), np.ones(len(plan)), np.full(len(plan), 0.5))
+    assert capped.adapt(1.0, 0.01) == capped.fastest == 2
+
+
+def test_probe_forgets_injections_older_than_its_memory(volume):
+    """With frame times, the correction rests on the injections of the last ``memory_s``:
+    a scene where the gauge read the drops at half their rain, then fully, is corrected by
+    the latter alone once the first part is forgotten."""
+    probe = _probe(volume, per_frame=16, min_injections=16, memory_s=10.0)
+    for k in range(100):
+        plan = probe.plan(CAM.shape, slope=0.0)
+        expected = np.ones(len(plan))
+        est = (0.5 if k < 50 else 1.0) * expected
+        probe.record(plan, est, expected, np.full(len(plan), 0.5), t_s=float(k))
+        if k == 49:
+            ratio, _n = probe.class_ratios()
+            assert np.nanmax(np.abs(ratio - 0.5)) < 1e-9
+    assert probe.injected == 100 * 16
+    injected, _c, _e = probe.class_counts()
+    assert injected.sum() == 11 * 16               # t = 89 ... 99
+    ratio, _n = probe.class_ratios()
+    assert np.nanmax(np.abs(ratio - 1.0)) < 1e-9
+    with pytest.raises(ValueError, match="memory_s"):
+        _probe(volume, memory_s=0.0)
+
+
+def test_window_rate_takes_every_drop_at_the_latest_correction():
+    """A drop is weighted, when its frame is decided, by the probe's correction of the
+    injections made until then; the window's record takes all its drops at the correction
+    of all the injections so far (the early ones' corrections rest on few injections)."""
+    sim = pytest.importorskip("raingauge.render.simulator")
+    cam = CAM.replace(noise_sigma_dn=2.0)
+    frames, _truth = sim.render_clip(cam, seconds=8.0, rain_rate_mm_h=30.0, seed=3, background="skimage:brick")
+    g = RainGauge(cam, window_s=8.0, step_s=8.0, keep_drops=True)
+    recs = []
+    for fr in frames:
+        recs += g.process(fr)
+    recs += g.flush()
+    rec = recs[-1]
+    assert g.probe.mature and len(g.drops) > 50
+    d = np.array([x["diameter_m"] for x in g.drops])
+    v = np.array([x["velocity_m_s"] for x in g.drops])
+    w = np.array([x["weight_s_m3"] for x in g.drops])
+    used = np.array([x["probe_correction"] for x in g.drops])
+    now = g.probe.correction(0.5 * d)
+    stored = np.sum(d ** 3 * v * w)
+    latest = np.sum(d ** 3 * v * w * used / now)
+    # the corrections moved while the drops were counted
+    assert np.median(np.abs(used / now - 1.0)) > 0.02
+    duration = len(g._frames) * cam.frame_interval_s
+    rate = 3.6e6 * math.pi / 6.0 * latest / duration
+    assert rec["rain_rate_mm_h"] == pytest.approx(rate, rel=1e-6)
+    assert abs(latest / stored - 1.0) > 1e-3

@@ -635,3 +635,69 @@ def test_sample_volume_follows_the_frames_flags():
         vol = g.sample_volume(flags)
         assert vol is not g.volume and vol.grow == 1.0
     assert g.volume.grow < 1.0
+
+
+def _bright_frames(n=300, level=170, noise=3.0):
+    """Window frame entries (time, flags, rejected, mean background, histogram, noise) of a
+    still, uniform background."""
+    from raingauge.gauge.volume import background_histogram
+
+    hist = background_histogram(np.full((90, 160), level, np.uint8))
+    return [[k / 30.0, ["low_contrast"], 0, float(level), hist, noise] for k in range(n)]
+
+
+def test_completion_continues_the_exponential_spectrum():
+    """Against a bright background the smallest drops are counted nowhere; the gauge fits the
+    slope of an exponential spectrum to the sizes it sees well and continues it down to the
+    smallest measurable diameter.  On drops drawn from an exponential spectrum the slope is
+    the drawn one and the completed rain the spectrum's below the cut."""
+    from raingauge.physics.drops import fall_velocity
+
+    cam = CAM.replace(noise_sigma_dn=3.0)
+    g = RainGauge(cam, drop_brightness_dn=250.0)
+    rng = np.random.default_rng(7)
+    lam, d0, n, duration = 2.5e3, 0.6e-3, 6000, 10.0           # [1/m], [m], [-], [s]
+    d = d0 + rng.exponential(1.0 / lam, n)
+    drops = [{"diameter_m": float(x), "velocity_m_s": float(fall_velocity(x)), "weight_s_m3": 1.0} for x in d]
+    comp = g._completion(_bright_frames(), drops, duration)
+    assert comp is not None
+    assert comp["lambda_per_mm"] == pytest.approx(2.5, rel=0.06)
+    d_min, d_cut = 2 * g.volume.min_radius_m, comp["d_cut_m"]
+    assert d_min < d_cut < 1.2e-3 and np.all(comp["diameter_m"] < d_cut)
+    grid = np.linspace(d_min, d_cut, 400)
+    dens = n / duration * lam * np.exp(-lam * (grid - d0))
+    want = 3.6e6 * math.pi / 6 * np.trapezoid(grid ** 3 * fall_velocity(grid) * dens, grid)
+    assert comp["rate_mm_h"] == pytest.approx(want, rel=0.12)
+    # over a dark background nearly every measurable size is counted: little to complete
+    dark = [[t, [], 0, 40.0, _bright_frames(1, level=40)[0][4], 1.0] for t, *_ in _bright_frames()]
+    counted = 3.6e6 * math.pi / 6 * sum(x["diameter_m"] ** 3 * x["velocity_m_s"] for x in drops) / duration
+    little = RainGauge(cam, drop_brightness_dn=250.0)._completion(dark, drops, duration)
+    assert little is None or little["rate_mm_h"] < 0.01 * counted
+    assert comp["rate_mm_h"] > 0.05 * counted
+    # too few drops to fix the slope
+    assert g._completion(_bright_frames(), drops[:60], duration) is None
+
+
+def test_completed_rain_is_in_the_rate_the_dsd_and_the_accumulation():
+    """A window over a bright, noisy sky: the record's rate holds the completed rain
+    (``completed_share``), its spectrum the completed small sizes, and the accumulation
+    the same rain as the rate."""
+    sim = pytest.importorskip("raingauge.render.simulator")
+    cam = default_profile().replace(width_px=640, height_px=360, noise_sigma_dn=3.0)
+    frames, truth = sim.render_clip(cam, seconds=15.0, rain_rate_mm_h=60.0, seed=4, background="ramp:150:190",
+                                    drop_brightness_dn=250.0)
+    g = RainGauge(cam, window_s=15.0, step_s=15.0)
+    recs = []
+    for fr in frames:
+        recs += g.process(fr)
+    recs += g.flush()
+    rec = recs[-1]
+    assert 0.005 < rec["completed_share"] < 0.3
+    assert rec["rain_rate_mm_h"] == pytest.approx(truth["rain_rate_mm_h"], rel=0.15)
+    d_cut = rec["min_detectable_diameter_mm"]
+    nd = np.asarray(rec["dsd_n_m3_mm"])
+    centres = np.asarray(rec["dsd_d_mm"])
+    assert np.all(nd[(centres > 0.4) & (centres < 0.6)] > 0)
+    assert d_cut > 0.6
+    window_h = len(g._frames) * cam.frame_interval_s / 3600.0
+    assert rec["accumulation_mm"] == pytest.approx(rec["rain_rate_mm_h"] * window_h, rel=0.01)

@@ -14,7 +14,9 @@ flagged "no_visible_drops"), accumulation_mm,
 drops_counted, drops_rejected_defocus, dsd_d_mm and dsd_n_m3_mm (N(D) in the
 32 Parsivel classes, m^-3 mm^-1), nt_m3, dm_mm, z_dbz, intensity_class,
 synop_4680, quality (flags), then nw_mm1_m3, lwc_g_m3, ke_flux_j_m2_h, z_mm6_m3,
-min_detectable_diameter_mm (the smallest drop visible against the background).
+min_detectable_diameter_mm (the smallest drop visible against the background) and
+completed_share (the share of the rate, the spectrum and the accumulation that continues
+the counted spectrum into the sizes the background leaves uncounted; 0 when none is).
 
 Example:
     raingauge measure rain.mkv --camera gauge-default --window 60 --step 10
@@ -116,7 +118,8 @@ def run(args: argparse.Namespace) -> int:
                           completeness_probe=not args.no_probe)
     except ValueError as exc:
         raise ConfigError(f"{exc}. Fix: choose a valid --velocity-model") from None
-    keys = list(RECORD_KEYS) + ["nw_mm1_m3", "lwc_g_m3", "ke_flux_j_m2_h", "z_mm6_m3", "min_detectable_diameter_mm"]
+    keys = list(RECORD_KEYS) + ["nw_mm1_m3", "lwc_g_m3", "ke_flux_j_m2_h", "z_mm6_m3", "min_detectable_diameter_mm",
+                                "completed_share"]
     writer = csv.writer(sys.stdout, lineterminator="\n") if args.format == "csv" else None
     if writer is not None:
         writer.writerow(keys)

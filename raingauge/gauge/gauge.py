@@ -55,7 +55,12 @@ against the window's background (Eq. 18: beta (E_r - I_b) under the detection
 threshold or under twice the noise) are missing from the count: the record
 gives the smallest diameter seen (``min_detectable_diameter_mm``), flags
 ``low_contrast`` and widens the upper limit of the interval by the share of
-the rate the hidden drops may carry.
+the rate the hidden drops may carry.  Sizes counted nowhere in the window (their
+sample volume under the floor everywhere) are completed: the exponential spectrum
+fitted to the sizes seen well is continued into them, and the record's rate, spectrum
+and accumulation include it (``completed_share``; :meth:`RainGauge._completion`).
+The record takes every drop of its window at the completeness probe's latest
+correction, and the accumulation adds each drop so, once, when it is first reported.
 
 Notes
 -----
@@ -152,6 +157,24 @@ WIND_UNCERTAINTY_M_S = 3.0
 #: Share of a window's frames that must carry a flag for the window to carry it [-].
 FLAG_SHARES = (("overexposed", 0.1), ("underexposed", 0.5), ("scene_motion", 0.2),
                ("lens_obscured", 0.05), ("dropped_frames", 0.0), ("low_contrast", 0.5))
+
+
+#: Completion of the spectrum below the smallest counted size (:meth:`RainGauge._completion`):
+#: drops needed above the fitted size [-], the share of its sample volume over the nominal
+#: dark background a size keeps to be fitted [-], and the largest rain the completion may add, relative to the counted
+#: rain [-] (more would rest on the extrapolation rather than on the drops).
+COMPLETION_MIN_DROPS = 100
+#: ... completed only where the smallest counted diameter exceeds the smallest measurable
+#: one by this factor (over a dark background at 1 gray level of noise it lies 10 % above it,
+#: at 3 gray levels 29 %) [-]
+COMPLETION_MIN_CUT = 1.15
+COMPLETION_FIT_VOLUME = 0.5
+COMPLETION_MAX_ADDED = 0.5
+
+#: The completeness probe remembers its injections over this many windows [-].
+PROBE_MEMORY_WINDOWS = 1.25
+#: Analysed frames between two settings of the probe's effort [-].
+PROBE_ADAPT_FRAMES = 30
 
 
 def condition_uncertainty(quality, noise_dn: float, wind_m_s: float = 0.0) -> float:
@@ -561,7 +584,8 @@ class RainGauge:
                               else _sample_volume(profile, velocity_model, defocus_model, grow=1.0))
         self.keep_drops = keep_drops
         #: the completeness probe (None when off or for the pillbox defocus model)
-        self.probe = (CompletenessProbe(profile, self.volume, velocity_model)
+        self.probe = (CompletenessProbe(profile, self.volume, velocity_model,
+                                        memory_s=PROBE_MEMORY_WINDOWS * self.window_s)
                       if completeness_probe and defocus_model == "uniform" else None)
         if drop_brightness_dn is not None and not (math.isfinite(drop_brightness_dn) and drop_brightness_dn > 0):
             raise ValueError(f"drop_brightness_dn must be a positive number of gray levels, got {drop_brightness_dn!r}")
@@ -570,13 +594,16 @@ class RainGauge:
         self._frame_interval = profile.frame_interval_s
         self._buffer: deque = deque(maxlen=3)          # (t, linear frame, frame index)
         self._n_in = 0
+        self._reported_mm = 0.0           # accumulation of the drops reported so far [mm]
+        self._reported_until = -math.inf
+        self._completed_mm = 0.0          # accumulation of the completed spectrum [mm]
+        self._completed_until = -math.inf
         self._frames: deque = deque()                   # (t, flags, rejected)
         self._window_drops: deque = deque()             # (t, D, v, weight)
         self._recent: deque = deque()                   # tracks of the drops seen in the last frames
         self._n_tracks = 0
         self._next_boundary = self.clock_start_s + self.step_s
         self._emitted = 0
-        self._accum_mm = 0.0
         self._last_t = None
         self._t_in = None                               # time of the last frame fed
         self._t_decided = None                          # time of the last frame whose drops were counted
@@ -843,6 +870,28 @@ class RainGauge:
         if self.defocus_model != "uniform" or (self._brightness_known(MATURE_BRIGHTNESS_SAMPLES) and
                                                (self.probe is None or self.probe.mature)):
             self._resolve_pending()
+        if self.probe is not None and self._n_in % PROBE_ADAPT_FRAMES == 0:
+            self._adapt_probe(t)
+
+    def _adapt_probe(self, t: float) -> None:
+        """Probe as often as the correction's sampling error needs: under half the rest of
+        the error of the rate over the last window, its counting error and the base
+        uncertainty :data:`BASE_UNCERTAINTY` in quadrature (:meth:`CompletenessProbe.adapt`);
+        at the least effort while no drop is counted (nothing to correct)."""
+        probe = self.probe
+        if not probe.mature:
+            probe.adapt(math.nan, math.nan)
+            return
+        drops = [d for d in self._window_drops if d["t"] >= t - self.window_s - 1e-9]
+        share = np.array([d["diameter_m"] ** 3 * d["velocity_m_s"] * d["weight_s_m3"] for d in drops])
+        ok = np.isfinite(share) & (share > 0)
+        if np.count_nonzero(ok) < self.min_drops:
+            probe.interval = probe.every
+            return
+        share = share[ok]
+        count_sd = float(np.sqrt(np.sum(share ** 2)) / np.sum(share))
+        radius = np.array([0.5 * d["diameter_m"] for d in drops])[ok]
+        probe.adapt(probe.rate_relative_sd(radius, share), math.hypot(count_sd, BASE_UNCERTAINTY))
 
     def _rain_slope(self) -> float:
         """The rain's direction in the image, dx/dy [-], that the detection smooths along.
@@ -915,13 +964,15 @@ class RainGauge:
         # behind it, times its share of the rate (2 a)^3 v / kappa(a)
         expected = np.zeros(len(plan))
         p_pass = np.zeros(len(plan))
+        kaps = np.atleast_1d(np.asarray(vol.kappa(np.array([p["radius_m"] for p in plan]), weights=weights,
+                                                  noise_dn=noise_dn, wind_m_s=wind), dtype=float))
         for j, p in enumerate(plan):
             x0, y0, cw, ch = p["box"]
             r = int(math.ceil(p["radius_px"]))
             xa = int(round(min(p["p0"][0], p["p1"][0]))) - r
             xb = int(round(max(p["p0"][0], p["p1"][0]))) + r + 1
             behind = frames[0][int(p["p0"][1]):int(p["p1"][1]) + 1, max(xa, 0):xb].astype(np.float32, copy=False)
-            kap = float(vol.kappa(p["radius_m"], weights=weights, noise_dn=noise_dn, wind_m_s=wind))
+            kap = float(kaps[j])
             if behind.size and kap >= floor:
                 # p over the pixels behind the drop, averaged as kappa averages it over the
                 # frame's pixels: the ratio then corrects that kappa and no other model of it
@@ -955,7 +1006,7 @@ class RainGauge:
                     continue
                 v = c["mot"] * float(vol.depth_m(a)) / (f * prof.exposure_s)
                 estimate[j] += (2.0 * a) ** 3 * v / kap
-        probe.record(plan, estimate, expected, p_pass)
+        probe.record(plan, estimate, expected, p_pass, t_s=t)
 
     def _resolve_pending(self) -> None:
         """Decide the frames kept back until the drop brightness E_r was known well enough."""
@@ -980,11 +1031,12 @@ class RainGauge:
             for d in self._prev_counted:
                 extra = d["accum_base_mm"] * half
                 d["accum_mm"] += extra
-                self._accum_mm += extra
+                if d["t"] < self._reported_until - 1e-9:
+                    # (its frame was reported already: the accumulation takes the rest now)
+                    self._reported_mm += extra
             self._prev_counted = counted
             for d in counted:
                 self._window_drops.append(d)
-                self._accum_mm += d["accum_mm"]
                 if self.keep_drops:
                     self.drops.append(d)
         self._pending.clear()
@@ -1237,9 +1289,11 @@ class RainGauge:
                 rejected += 1
                 self.rejections["no_volume"] += 1
                 continue
+            c_probe = 1.0
             if self.probe is not None:
                 # the share of the modelled volume the probe's drops of this size found
-                kap *= float(self.probe.correction(a))
+                c_probe = float(self.probe.correction(a))
+                kap *= c_probe
             # a drop whose streak touched another one is lost to the merge: count the
             # isolated ones up by the chance of isolation at this streak's size and frame
             area *= 1.0 - c["p_overlap"]
@@ -1253,7 +1307,8 @@ class RainGauge:
                 self.rejections["seen_before"] += 1
             d = {"t": t, "track": track, "x": xc, "y": yc, "ux": dx / T, "uy": mot / T, "w": w_app,
                  "diameter_m": 2 * a,
-                 "velocity_m_s": v, "weight_s_m3": weight, "blur_px": c["blur_px"], "width_px": c["width_px"],
+                 "velocity_m_s": v, "weight_s_m3": weight, "probe_correction": c_probe,
+                 "blur_px": c["blur_px"], "width_px": c["width_px"],
                  "apparent_width_px": w_app, "motion_px": mot, "chi2": c["chi2"],
                  "accum_base_mm": 1e3 * math.pi / 6 * (2 * a) ** 3 * v * weight}
             d["accum_mm"] = d["accum_base_mm"] * fill
@@ -1472,26 +1527,54 @@ class RainGauge:
         while self._frames and self._frames[0][0] < horizon - 1e-9:
             self._frames.popleft()
         while self._window_drops and self._window_drops[0]["t"] < horizon - 1e-9:
-            self._window_drops.popleft()
+            d = self._window_drops.popleft()
+            if d["t"] >= self._reported_until - 1e-9:
+                # in no reported window (a step longer than the window): into the accumulation
+                self._reported_mm += self._reweighted([d])[0]["accum_mm"]
         while self._gaps and self._gaps[0][1] < horizon - 1e-9:
             self._gaps.popleft()
         return out
 
+    def _reweighted(self, drops: list) -> list:
+        """The window's drops with the completeness probe's latest correction: each drop was
+        weighted, when its frame was decided, by the correction of the injections up to then;
+        the window's rate takes every drop at the correction of all the injections so far,
+        which the probe remembers over about a window (copies)."""
+        if self.probe is None or not self.probe.mature or not drops:
+            return drops
+        a = np.array([0.5 * d["diameter_m"] for d in drops])
+        now = np.asarray(self.probe.correction(a), dtype=float)
+        out = []
+        for d, c in zip(drops, now):
+            used = d.get("probe_correction", 1.0)
+            if c > 0 and used > 0 and c != used:
+                d = dict(d, weight_s_m3=d["weight_s_m3"] * used / c, accum_mm=d["accum_mm"] * used / c,
+                         accum_base_mm=d["accum_base_mm"] * used / c, probe_correction=float(c))
+            out.append(d)
+        return out
+
     def _record(self, t0: float, t1: float, *, partial: bool = False) -> dict:
         frames = [fr for fr in self._frames if t0 - 1e-9 <= fr[0] < t1 - 1e-9]
-        drops = [d for d in self._window_drops if t0 - 1e-9 <= d["t"] < t1 - 1e-9]
+        drops = self._reweighted([d for d in self._window_drops if t0 - 1e-9 <= d["t"] < t1 - 1e-9])
         duration = len(frames) * self._frame_interval
         quality: list[str] = []
         if partial or duration < self.window_s - 2.5 * self._frame_interval:
             quality.append("partial_window")
+        completion = None
         if duration <= 0:
             prod = _products.window_products([], [], [], 1.0)
             prod["rain_rate_ci95_mm_h"] = [0.0, float("nan")]
         else:
-            prod = _products.window_products(
-                [d["diameter_m"] for d in drops], [d["velocity_m_s"] for d in drops],
-                [d["weight_s_m3"] for d in drops], duration,
-                empty_scale_mm_h=self._empty_scale * self.window_s / duration)
+            dd = [d["diameter_m"] for d in drops]
+            vv = [d["velocity_m_s"] for d in drops]
+            ww = [d["weight_s_m3"] for d in drops]
+            completion = self._completion(frames, drops, duration)
+            if completion is not None:
+                dd += list(completion["diameter_m"])
+                vv += list(completion["velocity_m_s"])
+                ww += list(completion["weight_s_m3"])
+            prod = _products.window_products(dd, vv, ww, duration,
+                                             empty_scale_mm_h=self._empty_scale * self.window_s / duration)
         n_frames = max(len(frames), 1)
         frame_flags = [flag for flag, share in FLAG_SHARES
                        if sum(1 for fr in frames if flag in fr[1]) > share * n_frames]
@@ -1510,9 +1593,14 @@ class RainGauge:
             if self.probe is not None:
                 probe_sd = self.probe.rate_relative_sd([0.5 * d["diameter_m"] for d in drops], share)
                 systematic = math.hypot(systematic, probe_sd)
-            prod["rain_rate_ci95_mm_h"] = list(_products.rate_interval(
-                per_drop[per_drop > 0], empty_scale=self._empty_scale * self.window_s / duration,
-                systematic_rel=systematic))
+            lo, hi = _products.rate_interval(per_drop[per_drop > 0],
+                                             empty_scale=self._empty_scale * self.window_s / duration,
+                                             systematic_rel=systematic)
+            if completion is not None:
+                # the completed rain rests on the spectrum's shape: the interval runs from the
+                # counted rain's lower limit to the completed rain's upper one
+                hi *= prod["rain_rate_mm_h"] / max(float(per_drop.sum()), 1e-300)
+            prod["rain_rate_ci95_mm_h"] = [lo, hi]
             prod["drops_counted"] = int(np.count_nonzero(per_drop > 0))
         rate = prod["rain_rate_mm_h"]
         counted = prod["drops_counted"]
@@ -1550,7 +1638,8 @@ class RainGauge:
             "t_end_s": float(t1),
             "rain_rate_mm_h": float(rate),
             "rain_rate_ci95_mm_h": [num(v) for v in prod["rain_rate_ci95_mm_h"]],
-            "accumulation_mm": float(self._accum_mm_until(t1)),
+            "accumulation_mm": float(self._reported_accumulation(t1) +
+                                     self._completed_accumulation(t0, t1, completion, partial)),
             "drops_counted": int(counted),
             "drops_rejected_defocus": int(sum(fr[2] for fr in frames)),
             "dsd_d_mm": prod["dsd_d_mm"],
@@ -1567,7 +1656,93 @@ class RainGauge:
             "ke_flux_j_m2_h": float(prod["ke_flux_j_m2_h"]),
             "z_mm6_m3": float(prod["z_mm6_m3"]),
             "min_detectable_diameter_mm": num(1e3 * d_det),
+            "completed_share": 0.0 if completion is None else float(completion["rate_mm_h"] / rate),
         }
+
+    def _completed_accumulation(self, t0: float, t1: float, completion, partial: bool) -> float:
+        """The accumulation the spectrum's completion added up to t1 [mm]: each stretch of
+        time once, at the completed rain of the first full window reported over it."""
+        if completion is not None and not partial:
+            start = max(self._completed_until, t0)
+            if t1 > start:
+                self._completed_mm += completion["rate_mm_h"] * (t1 - start) / 3600.0
+                self._completed_until = t1
+        return self._completed_mm
+
+    def _completion(self, frames, drops, duration: float):
+        """The rain of the sizes the window's frames leave uncounted, from the spectrum of the
+        counted ones; None where every measurable size is counted.
+
+        A size is counted where its sample volume over the window's backgrounds (their
+        contrast histogram, noise and the wind) stays above the floor
+        (:data:`KAPPA_FLOOR_REL`); against a bright sky at 3 gray levels of noise the
+        smallest counted diameter is 0.7-1 mm, and the sizes below it carry 5-30 % of the
+        rain (Marshall-Palmer at 30-2 mm/h).  The counted drops of the sizes that keep at
+        least :data:`COMPLETION_FIT_VOLUME` of the volume they have over the nominal dark
+        background (:meth:`SampleVolume.visible_fraction`) fix the slope Lambda of an
+        exponential spectrum N(D) = N_f Lambda exp(-Lambda (D - D_f)) (the maximum
+        likelihood estimate of the truncated exponential: 1 / Lambda is the density-weighted
+        mean of D - D_f; N_f their density), which is continued down to the smallest
+        measurable diameter.  Marshall-Palmer spectra are exponential; a gamma spectrum of
+        mu = 3 holds fewer small drops than its continued tail, and its completion adds
+        about a third more than the missing rain (12.5 % of the rain below 0.75 mm at
+        2 mm/h, completed as 17 %).
+
+        Returns
+        -------
+        None, or a dict: ``diameter_m, velocity_m_s, weight_s_m3`` arrays of the completed
+        sizes as entries of the window (``weight_s_m3`` = density x duration), their
+        ``rate_mm_h``, the fitted ``lambda_per_mm`` and the smallest counted ``d_cut_m``.
+        """
+        from raingauge.physics.drops import fall_velocity
+
+        hists = [fr[4] for fr in frames if len(fr) > 4 and fr[4] is not None]
+        if self.defocus_model != "uniform" or not hists or not drops or not self._brightness_known(10):
+            return None
+        e_r = min(self._drop_brightness(), self._white_dn)
+        flags = [flag for flag, share in FLAG_SHARES if sum(1 for fr in frames if flag in fr[1]) > share * len(frames)]
+        vol = self.sample_volume(flags)
+        weights = vol.histogram_weights(np.sum(hists, axis=0), e_r)
+        noises = [fr[5] for fr in frames if len(fr) > 5 and np.isfinite(fr[5])]
+        noise = float(np.median(noises)) if noises else None
+        wind = self._wind_m_s()
+        d_min = 2.0 * float(vol.min_radius_m)
+        grid = np.geomspace(d_min, 8e-3, 160)
+        kap = np.nan_to_num(np.asarray(vol.kappa(0.5 * grid, weights=weights, noise_dn=noise, wind_m_s=wind),
+                                       dtype=float))
+        counted = kap >= self._kappa_floor(weights, vol, wind)
+        if not counted.any():
+            return None
+        d_cut = float(grid[np.argmax(counted)])
+        if d_cut <= COMPLETION_MIN_CUT * d_min:
+            # (the volume falls to zero at the smallest measurable size on any background)
+            return None
+        best = np.nan_to_num(np.asarray(vol.kappa(0.5 * grid), dtype=float))
+        well = counted & (kap >= COMPLETION_FIT_VOLUME * best)
+        if not well.any():
+            return None
+        d_fit = max(float(grid[np.argmax(well)]), d_cut)
+        d = np.array([x["diameter_m"] for x in drops])
+        rho = np.array([x["weight_s_m3"] for x in drops]) / duration
+        sel = np.isfinite(d) & np.isfinite(rho) & (rho > 0) & (d >= d_fit)
+        if np.count_nonzero(sel) < COMPLETION_MIN_DROPS:
+            return None
+        n_fit = float(rho[sel].sum())
+        mean_excess = float(np.sum(rho[sel] * (d[sel] - d_fit))) / n_fit
+        if not mean_excess > 0:
+            return None
+        lam = 1.0 / mean_excess                                          # [1/m]
+        edges = np.linspace(d_min, d_cut, 25)
+        dc = 0.5 * (edges[1:] + edges[:-1])
+        dens = n_fit * lam * np.exp(-lam * (dc - d_fit)) * np.diff(edges)     # [m^-3]
+        v = np.nan_to_num(np.asarray(fall_velocity(dc, model=self.velocity_model), dtype=float), nan=0.0)
+        rate = float(3.6e6 * math.pi / 6.0 * np.sum(dc ** 3 * v * dens))
+        counted_rate = float(3.6e6 * math.pi / 6.0 * np.sum(
+            np.array([x["diameter_m"] ** 3 * x["velocity_m_s"] for x in drops]) * rho))
+        if not (rate > 0 and rate <= COMPLETION_MAX_ADDED * counted_rate):
+            return None
+        return {"diameter_m": dc, "velocity_m_s": v, "weight_s_m3": dens * duration, "rate_mm_h": rate,
+                "lambda_per_mm": 1e-3 * lam, "d_cut_m": d_cut}
 
     def _frame_weights(self, c: dict, e_r: float):
         """Contrast weights of the frame of candidate ``c`` (:meth:`SampleVolume.histogram_weights`),
@@ -1637,7 +1812,13 @@ class RainGauge:
         share = 1.0 - float(w[above].sum()) / total if total > 0 else 1.0
         return d_det, float(min(max(share, 0.0), 0.98))
 
-    def _accum_mm_until(self, t1: float) -> float:
-        """Accumulation since the start of the stream up to t1 [mm]."""
-        later = sum(d["accum_mm"] for d in self._window_drops if d["t"] >= t1 - 1e-9)
-        return self._accum_mm - later
+    def _reported_accumulation(self, t1: float) -> float:
+        """Accumulation of the counted drops since the start of the stream up to t1 [mm]: the
+        drops since the last record are added at the completeness probe's latest correction,
+        as the record's rate takes them (a drop's correction when its frame was decided rests
+        on the injections until then; early in a stream, on few)."""
+        if t1 > self._reported_until:
+            new = [d for d in self._window_drops if self._reported_until - 1e-9 <= d["t"] < t1 - 1e-9]
+            self._reported_mm += sum(d["accum_mm"] for d in self._reweighted(new))
+            self._reported_until = t1
+        return self._reported_mm
