@@ -112,7 +112,7 @@ class CompletenessProbe:
         often while the correction is less certain than the rest of the rate).
     fastest : int
         Probe every this many frames at the most effort, once mature (the probe's share
-        of the gauge's time: 10-15 % at ``every`` = 6, about a third at 2).
+        of the gauge's time at 1280x720: 10-15 % at ``every`` = 6, up to about 45 % at 2).
     history : int
         Injections remembered at most (the latest) [-].
     memory_s : float, optional
