@@ -382,19 +382,25 @@ def test_merge_probability_is_poisson_coverage():
 
 def test_violent_rain_counts_merged_streaks_back():
     """100 mm/h: a large share of the streaks touch another one in the same frame and cannot
-    be measured.  Counting the isolated ones up by the Poisson chance of a merge (from the
-    frame's own streak density) brings the rate back to the truth within the counting
-    error of ~40 drops; without it the gauge reads low by that share."""
+    be measured.  Without the completeness probe, counting the isolated ones up by the
+    Poisson chance of a merge (from the frame's own streak density) brings the rate back
+    to the truth within the counting error of ~40 drops; without it the gauge reads low by
+    that share.  With the probe (whose drops merge as the real ones do) the analytic
+    chance is not applied again, and the rate comes back as well."""
     sim = pytest.importorskip("raingauge.render.simulator")
     frames, truth = sim.render_clip(CAM, seconds=4.0, rain_rate_mm_h=100.0, seed=11)
     true_rate = truth["rain_rate_mm_h"]
-    corrected = _run_cam(CAM, frames, window_s=4.0, step_s=4.0)[-1]
-    plain = _run_cam(CAM, frames, window_s=4.0, step_s=4.0, overlap_correction=False)[-1]
+    corrected = _run_cam(CAM, frames, window_s=4.0, step_s=4.0, completeness_probe=False)[-1]
+    plain = _run_cam(CAM, frames, window_s=4.0, step_s=4.0, overlap_correction=False, completeness_probe=False)[-1]
     assert corrected["drops_counted"] == plain["drops_counted"] > 25
     lo, hi = corrected["rain_rate_ci95_mm_h"]
     assert lo <= true_rate <= hi
     assert corrected["rain_rate_mm_h"] / true_rate == pytest.approx(1.0, abs=0.35)
     assert corrected["rain_rate_mm_h"] > 1.25 * plain["rain_rate_mm_h"]
+    probed = _run_cam(CAM, frames, window_s=4.0, step_s=4.0)[-1]
+    assert probed == _run_cam(CAM, frames, window_s=4.0, step_s=4.0, overlap_correction=False)[-1]
+    assert probed["rain_rate_mm_h"] / true_rate == pytest.approx(1.0, abs=0.35)
+    assert probed["rain_rate_mm_h"] > 1.15 * plain["rain_rate_mm_h"]
 
 
 def _focus_population(n, rng, *, q_min=0.55, rel_noise=0.06):

@@ -35,10 +35,13 @@ Every analysed frame is a snapshot of the sample volume.  Each accepted streak
 carries Delta / (kappa(a) A_R (1 - p)) [s m^-3] (:mod:`raingauge.gauge.volume`):
 kappa(a) the volume per image pixel in which the tests accept a drop of radius
 a in one frame, A_R the area in which its streak lies whole, p the chance that
-another streak of the frame touched it (:func:`merge_probability`, Poisson
-coverage from the frame's measured streak density; merged or hidden streaks
-are not measured; in a cross wind the streaks are parallelograms slanted alike,
-and their row widths, not their boxes, set the coverage).  In a cross wind u a
+another streak of the frame touched it (merged or hidden streaks are not
+measured).  With the completeness probe (the default) p is in the probe's
+correction of kappa: its drops go into the frame with its rain and merge as the
+real ones do.  Without it p is :func:`merge_probability` (Poisson coverage from
+the frame's measured streak density; in a cross wind the streaks are
+parallelograms slanted alike, and their row widths, not their boxes, set the
+coverage).  In a cross wind u a
 drop crosses each pixel faster and its streak is dimmer by cos(theta),
 tan(theta) = u / v(a): kappa is taken at each size's dimmed contrast
 (:meth:`raingauge.gauge.volume.SampleVolume.wind_dimming`).  So each frame estimates the density over one frame period
@@ -82,7 +85,7 @@ says so (:class:`raingauge.gauge.volume.SampleVolume` ``grow``).
 kappa(a) comes from a model of a streak over a locally uniform background.  A
 textured scene breaks streaks where the background's contrast changes, moving
 objects hide the rain in front of them from the three-frame test, noise biases
-faint streaks: the completeness probe
+faint streaks, and in heavy rain streaks merge: the completeness probe
 (:class:`raingauge.gauge.completeness.CompletenessProbe`) injects artificial
 drops of known size and depth into crops of the gauge's own frames, runs them
 through the same detection, tests and sizing, and multiplies kappa(a) by the
@@ -483,19 +486,6 @@ class _SampleRing:
         return self._a[:self._n], self._b[:self._n]
 
 
-class _LabelMask:
-    """The bool image ``keep[labels]``, computed only where it is sliced (the probe looks
-    at a few small windows of the frame)."""
-
-    def __init__(self, labels: np.ndarray, keep: np.ndarray):
-        self.labels = labels
-        self.keep = keep
-        self.shape = labels.shape
-
-    def __getitem__(self, index):
-        return self.keep[self.labels[index]]
-
-
 class RainGauge:
     """A camera rain gauge on a stream of frames.
 
@@ -529,7 +519,9 @@ class RainGauge:
         by a blur test).  See :mod:`raingauge.gauge.volume`.
     overlap_correction : bool
         Count isolated drops up by the chance that a streak of their shape would have
-        touched another one in the same frame (merged streaks are not measured).
+        touched another one in the same frame (merged streaks are not measured;
+        :func:`merge_probability`).  Without the completeness probe only: the probe's drops
+        meet the frame's rain as the real ones do, and its correction holds the merges.
     volume : SampleVolume, optional
         A precomputed sample volume for this profile and these options.
     drop_brightness_dn : float, optional
@@ -587,6 +579,9 @@ class RainGauge:
         self.probe = (CompletenessProbe(profile, self.volume, velocity_model,
                                         memory_s=PROBE_MEMORY_WINDOWS * self.window_s)
                       if completeness_probe and defocus_model == "uniform" else None)
+        # the probe's drops merge with the frame's rain as the real ones do: its correction
+        # holds the merges, and the analytic chance of one would count them twice
+        self._overlap_on = self.overlap_correction and self.probe is None
         if drop_brightness_dn is not None and not (math.isfinite(drop_brightness_dn) and drop_brightness_dn > 0):
             raise ValueError(f"drop_brightness_dn must be a positive number of gray levels, got {drop_brightness_dn!r}")
         self.fixed_drop_brightness_dn = None if drop_brightness_dn is None else float(drop_brightness_dn)
@@ -861,11 +856,7 @@ class RainGauge:
         self._pending.append((entry, prepared))
         self._last_t = t
         if probing:
-            # the streaks the probe wipes out of its copies of frame n (not single noise pixels)
-            long_ = stats[:, 3] >= 6
-            long_[0] = False
-            self._run_probe((prev, cur, nxt), raws if u8 else None, _LabelMask(labels, long_), slope, vol, t,
-                            ref_bg=ref_bg,
+            self._run_probe((prev, cur, nxt), raws if u8 else None, slope, vol, t, ref_bg=ref_bg,
                             contrast=contrast, hist=entry[4], noise_dn=self._frame_noise_change / math.sqrt(1.5))
         if self.defocus_model != "uniform" or (self._brightness_known(MATURE_BRIGHTNESS_SAMPLES) and
                                                (self.probe is None or self.probe.mature)):
@@ -932,7 +923,7 @@ class RainGauge:
             return float(np.median(self._law_drifts))
         return 0.0
 
-    def _run_probe(self, frames, raws, occupied, slope, vol, t, *, ref_bg, contrast, hist, noise_dn) -> None:
+    def _run_probe(self, frames, raws, slope, vol, t, *, ref_bg, contrast, hist, noise_dn) -> None:
         """Inject the completeness probe's artificial drops into crops of this frame, run them
         through the frame's detection, measurement and tests, and log which pass
         (:class:`raingauge.gauge.completeness.CompletenessProbe`)."""
@@ -953,10 +944,13 @@ class RainGauge:
         if not plan:
             return
         lin, raw, centres = probe.canvas(frames, plan, min(e_r, self._white_dn), raws=raws,
-                                         delinearize=prof.delinearize, occupied=occupied, noise_dn=noise_dn)
+                                         delinearize=prof.delinearize, noise_dn=noise_dn)
         spike = tuple(raw) if raw is not None else spike_image(*lin)
         lab_c, st_c = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope,
                                      slopes=self._frame_slopes, grow=vol.grow)
+        # a drop merged with a streak the crop cuts is lost, as it would be in the frame
+        st_c = st_c.copy()
+        st_c[probe.cut_components(st_c, plan), 4] = 0
         weights = self.volume.histogram_weights(hist, min(e_r, self._white_dn))
         wind = self._wind_m_s()
         floor = self._kappa_floor(weights, vol, wind)
@@ -989,8 +983,8 @@ class RainGauge:
                                               contrast=contrast, probe=True)
             cx = np.array([c[0] for c in centres])
             cy = np.array([c[1] for c in centres])
-            # a streak measured of an injected drop lies on it (frame n's detected streaks
-            # were wiped out of the crops)
+            # a streak measured of an injected drop lies on it (a real drop of frame n is
+            # rarely whole and counted within that reach of it)
             reach_y = np.array([0.25 * p["motion_px"] + 2.0 for p in plan])
             reach_x = np.array([p["radius_px"] + 2.0 + 0.25 * abs(p["p1"][0] - p["p0"][0]) for p in plan])
             for c in prepared:
@@ -1140,7 +1134,7 @@ class RainGauge:
             bright = np.isfinite(ib) & (w_app[idx] >= 2.5)
             self._brightness.extend(ib[bright], (ib + focused)[bright])
         p_over = (self._overlap_probabilities(labels, valid, tab, idx, stats=stats)
-                  if self.overlap_correction and not probe else np.zeros(idx.size))
+                  if self._overlap_on and not probe else np.zeros(idx.size))
         prepared = []
         for n, k in enumerate(idx):
             prepared.append({"t": t, "w_app": float(w_app[k]), "mot": float(mot[k]), "dx": float(dx[k]),
@@ -1244,7 +1238,7 @@ class RainGauge:
             cands.append((sp, w_app, mot, dx, xc, yc, (ib, total)))
         prepared = []
         for sp, w_app, mot, dx, xc, yc, photo in cands:
-            p_over = self._overlap_probability(labels, sp) if self.overlap_correction else 0.0
+            p_over = self._overlap_probability(labels, sp) if self._overlap_on else 0.0
             prepared.append({"t": t, "w_app": w_app, "mot": mot, "dx": dx, "xc": xc, "yc": yc,
                              "photo": photo, "p_overlap": p_over, "blur_px": sp.blur_px,
                              "width_px": sp.width_px, "chi2": sp.cross_fit.get("chi2"),
