@@ -977,16 +977,22 @@ class RainGauge:
         # (2 a)^3 v / kappa(a) with a, v and kappa as measured (0 when it is not counted)
         estimate = np.zeros(len(plan))
         if np.any(st_c[1:, 4] > 0):
-            # (the 8-bit canvases of a linear camera are the float ones' numbers)
-            canvas = raw if raw is not None else lin
-            prepared, _ = self._measure_table(lab_c, st_c, canvas, canvas[0], canvas[1], t, ref_bg=ref_bg,
-                                              contrast=contrast, probe=True)
             cx = np.array([c[0] for c in centres])
             cy = np.array([c[1] for c in centres])
             # a streak measured of an injected drop lies on it (a real drop of frame n is
             # rarely whole and counted within that reach of it)
             reach_y = np.array([0.25 * p["motion_px"] + 2.0 for p in plan])
             reach_x = np.array([p["radius_px"] + 2.0 + 0.25 * abs(p["p1"][0] - p["p0"][0]) for p in plan])
+            # only the labels whose box meets an injected drop's reach can be matched to one:
+            # the frame's own streaks in the crops are not measured
+            sx, sy = st_c[:, 0:1].astype(float), st_c[:, 1:2].astype(float)
+            ex, ey = sx + st_c[:, 2:3], sy + st_c[:, 3:4]
+            keep = ((sx <= cx + reach_x) & (ex - 1 >= cx - reach_x)
+                    & (sy <= cy + reach_y) & (ey - 1 >= cy - reach_y)).any(axis=1)
+            # (the 8-bit canvases of a linear camera are the float ones' numbers)
+            canvas = raw if raw is not None else lin
+            prepared, _ = self._measure_table(lab_c, st_c, canvas, canvas[0], canvas[1], t, ref_bg=ref_bg,
+                                              contrast=contrast, probe=True, keep=keep)
             for c in prepared:
                 near = np.flatnonzero((np.abs(cx - c["xc"]) <= reach_x) & (np.abs(cy - c["yc"]) <= reach_y))
                 if near.size == 0:
@@ -1055,12 +1061,13 @@ class RainGauge:
         return np.nonzero(ok)[0] + 1
 
     def _measure_table(self, labels, stats, change, prev, cur, t, *, ref_bg=None, contrast=None,
-                       probe: bool = False):
+                       probe: bool = False, keep=None):
         """Closed-form measurement of all screened streaks of a frame at once
         (:func:`raingauge.gauge.streaks.measure_streak_table`), then the velocity law, the
         photometric test of Eq. (18) and the overlap chance, all as arrays.  With ``probe``
         (the completeness probe's canvas, of the labels' shape) nothing is logged: no
-        rejection counts, no brightness samples, no overlap chance."""
+        rejection counts, no brightness samples, no overlap chance.  ``keep`` (bool over the
+        labels) limits the measurement to those labels."""
         prof = self.profile
         f = prof.focal_length_px
         z0 = prof.focus_distance_m
@@ -1071,6 +1078,8 @@ class RainGauge:
         bmax = beta_max(T)
         valid = stats[:, 4] > 0
         sel = self._screen(stats, shape=(M, N))
+        if keep is not None:
+            sel = sel[np.asarray(keep, bool)[sel]]
         rejections = Counter() if probe else self.rejections
         tab = measure_streak_table(change, labels, stats, sel, valid=valid, cur=cur, prev=prev,
                                    contrast=contrast, noise_sigma=self.noise_change)
