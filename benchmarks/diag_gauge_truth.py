@@ -27,6 +27,10 @@ them between clips and with the probe's, not with 1.
 
     python benchmarks/diag_gauge_truth.py --rate 10 --background bright_sky --noise 3
     python benchmarks/diag_gauge_truth.py --rate 30 --wind 3 --seconds 60
+    python benchmarks/diag_gauge_truth.py --rate 100 --background dark_uniform --noise 1 --given-brightness
+
+The first line gives the drop brightness E_r the gauge estimated beside the simulator's;
+``--given-brightness`` runs the gauge on the simulator's instead.
 """
 
 from __future__ import annotations
@@ -89,7 +93,7 @@ def match(truth, x, y):
     return j if u[j] <= 1.0 else -1
 
 
-def run(rate, background, noise, wind, seconds, seed, size):
+def run(rate, background, noise, wind, seconds, seed, size, *, given_brightness=False):
     from raingauge.gauge import RainGauge
     from raingauge.gauge.completeness import CLASS_EDGES_M
     from raingauge.gauge.gauge import KAPPA_FLOOR_REL
@@ -103,7 +107,9 @@ def run(rate, background, noise, wind, seconds, seed, size):
     spec, motion, e_r = BACKGROUNDS[background]
     sim = simulate(prof, seconds=seconds, seed=seed, background=spec, motion=motion, wind_m_s=wind,
                    drop_brightness_dn=e_r, truth_drops=True, rain_rate_mm_h=rate)
-    g = RainGauge(prof, window_s=seconds, step_s=seconds, keep_drops=True)
+    # given the simulator's drop brightness, the gauge does not estimate it from its streaks
+    g = RainGauge(prof, window_s=seconds, step_s=seconds, keep_drops=True,
+                  drop_brightness_dn=e_r if given_brightness else None)
     fps = prof.frame_rate_hz
     truth = {}
     recs = []
@@ -117,7 +123,8 @@ def run(rate, background, noise, wind, seconds, seed, size):
     true_rate = float(tr["rain_rate_mm_h"])
     print(f"{rate} mm/h {background} noise {noise} wind {wind}: gauge {rec['rain_rate_mm_h']:.3f} "
           f"truth {true_rate:.3f} ratio {rec['rain_rate_mm_h'] / true_rate:.3f}  "
-          f"Dm {rec['dm_mm']} / {tr['windows'][-1]['dm_mm']:.3f}")
+          f"Dm {rec['dm_mm']} / {tr['windows'][-1]['dm_mm']:.3f}  "
+          f"E_r {g.drop_brightness_estimate_dn:.1f} / {e_r:.1f}{' (given)' if given_brightness else ''}")
 
     # ---- counted drops against the drops they are
     found = set()
@@ -193,12 +200,15 @@ def main(argv=None) -> int:
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--size", default="1280x720", help="frame size WxH [px]")
+    ap.add_argument("--given-brightness", action="store_true",
+                    help="give the gauge the simulator's drop brightness E_r instead of its estimate")
     args = ap.parse_args(argv)
     try:
         w, h = (int(s) for s in args.size.lower().split("x"))
     except ValueError:
         ap.error(f"--size must be WxH, e.g. 1280x720, got {args.size!r}")
-    run(args.rate, args.background, args.noise, args.wind, args.seconds, args.seed, (w, h))
+    run(args.rate, args.background, args.noise, args.wind, args.seconds, args.seed, (w, h),
+        given_brightness=args.given_brightness)
     return 0
 
 
