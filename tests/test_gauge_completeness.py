@@ -186,6 +186,62 @@ def test_a_drop_merged_with_a_streak_the_crop_cuts_is_lost(volume):
         assert bool(cut[lab]) == (i == 0 or other), i
 
 
+def test_crops_grow_to_hold_the_frames_streaks_whole(volume):
+    """A streak of the frame reaching into a crop is held whole by the grown crop: a drop
+    merged with it meets all of it in the canvas, as in the frame, and is not marked cut.
+    A blob many times the crop (a moving object) is left cut, and the crops stay inside
+    the frame."""
+    from raingauge.gauge.streaks import detect_streaks, spike_image
+
+    rng = np.random.default_rng(5)
+    M, N = CAM.shape
+    prev, cur, nxt = (40.0 + rng.standard_normal((3, M, N))).astype(np.float32)
+    probe = _probe(volume, per_frame=12)
+    plan = [p for p in probe.plan(CAM.shape, slope=0.0) if p["radius_m"] > 0.4e-3]
+    # the first drop with room for the streak above and below its crop
+    plan.sort(key=lambda p: not (p["box"][1] >= 30 and p["box"][1] + p["box"][3] <= M - 30))
+    assert len(plan) >= 2
+    p0, p1 = plan[0], plan[1]
+    x0, y0, cw, ch = p0["box"]
+    assert y0 >= 30 and y0 + ch <= M - 30
+    # a streak touching the first drop, running 15 rows past its crop's top and bottom
+    xs = int(round(p0["centre"][0] + p0["radius_px"])) - 1
+    top, bottom = y0 - 15, y0 + ch + 15
+    cur[top:bottom, xs:xs + 3] += 150.0
+    _, stats = detect_streaks(spike_image(prev, cur, nxt), c=3.0)
+    boxes = [p["box"] for p in plan]
+    probe.enlarge(plan, stats, CAM.shape)
+    for p, old in zip(plan, boxes):
+        nx, ny, nw, nh = p["box"]
+        assert 1 <= nx and 1 <= ny and nx + nw <= N - 1 and ny + nh <= M - 1
+        # a grown crop still holds the old one
+        assert nx <= old[0] and ny <= old[1] and nx + nw >= old[0] + old[2] and ny + nh >= old[1] + old[3]
+    nx, ny, nw, nh = p0["box"]
+    assert ny <= top and ny + nh >= bottom
+    lin, _raw, centres = probe.canvas((prev, cur, nxt), plan, 220.0, noise_dn=1.0)
+    labels, stats_c = detect_streaks(spike_image(*lin), c=3.0)
+    cut = CompletenessProbe.cut_components(stats_c, plan)
+    lab = labels[int(round(centres[0][1])), int(round(centres[0][0]))]
+    assert lab > 0 and not cut[lab]
+    # the merged blob spans the streak's rows (the canvas puts the crop's top at row 0)
+    assert stats_c[lab, 3] >= bottom - top - 2
+
+    # a blob across the whole frame's width through the second drop's crop is not taken
+    # in: it stays cut there
+    cur = prev.copy()
+    bx0, by0, bcw, bch = p1["box"]
+    cur[by0 + 2:by0 + 8, :] += 150.0
+    _, stats = detect_streaks(spike_image(prev, cur, nxt), c=3.0)
+    assert stats[1:, 2].max() > 4 * bcw
+    probe.enlarge([p1], stats, CAM.shape)
+    assert p1["box"] == (bx0, by0, bcw, bch)
+    lin, _raw, centres = probe.canvas((prev, cur, nxt), [p1], 220.0, noise_dn=1.0)
+    labels, stats_c = detect_streaks(spike_image(*lin), c=3.0)
+    cut = CompletenessProbe.cut_components(stats_c, [p1])
+    lab1 = labels[5, p1["canvas_box"][0] + 1]
+    assert lab1 > 0 and cut[lab1]
+
+
 def test_canvas_adds_the_eq17_streak_to_frame_n_only(volume):
     """Frames n-1 and n+1 are copied unchanged; frame n gains beta (E_r - I_b), whose sum
     over the streak is its exposure area pi a_i^2 times the contrast (Eqs. 15-17)."""
@@ -514,8 +570,8 @@ def test_window_rate_takes_every_drop_at_the_latest_correction():
     now = g.probe.correction(0.5 * d)
     stored = np.sum(d ** 3 * v * w)
     latest = np.sum(d ** 3 * v * w * used / now)
-    # the corrections moved while the drops were counted
-    assert np.median(np.abs(used / now - 1.0)) > 0.02
+    # the corrections moved while the drops were counted (the early ones' most)
+    assert np.max(np.abs(used / now - 1.0)) > 0.05
     duration = len(g._frames) * cam.frame_interval_s
     rate = 3.6e6 * math.pi / 6.0 * latest / duration
     assert rec["rain_rate_mm_h"] == pytest.approx(rate, rel=1e-6)

@@ -493,6 +493,72 @@ def test_drop_brightness_with_a_reference_that_follows_the_contrast():
     assert e_r < const                                  # q rises as C falls below 160
 
 
+def test_focus_percentile_is_the_drop_brightness_fixed_point_and_weighs_its_samples():
+    """The probe's percentile of measured focus: with equal weights the fixed point
+    drop_brightness_dn takes of contrasts (E_b 0, q_ref 1; within the half-sample its
+    weighted percentile places differently); integer weights count as repeated samples;
+    weights that favour the low tail pull it down."""
+    from raingauge.gauge.gauge import drop_brightness_dn, focus_percentile
+
+    rng = np.random.default_rng(8)
+    q = np.concatenate([rng.normal(0.97, 0.08, 3000), rng.uniform(0.0, 0.2, 1500)])
+    fp = focus_percentile(q, q_min=0.6, percentile=75.0)
+    assert fp == pytest.approx(drop_brightness_dn(q, np.zeros_like(q), q_min=0.6, q_ref=1.0, percentile=75.0),
+                               abs=2e-3)
+    # the defocused share below q_min fp does not move it
+    assert focus_percentile(q[:3000], q_min=0.6) == pytest.approx(fp, abs=3e-3)
+    k = rng.integers(1, 4, q.size)
+    assert focus_percentile(q, k, q_min=0.6) == pytest.approx(focus_percentile(np.repeat(q, k), q_min=0.6),
+                                                              abs=2e-3)
+    low = np.where(q < 0.97, 5.0, 1.0)
+    assert focus_percentile(q, low, q_min=0.6) < fp - 0.02
+    assert np.isnan(focus_percentile([], []))
+
+
+def test_drop_brightness_takes_the_probes_reference_once_it_has_enough_samples():
+    """The streaks of heavy rain are lit further by the drops they overlap and their focus
+    percentile rises above the model's; the probe's drops, drawn at a known E_r, show the
+    same rise.  With PROBE_FOCUS_SAMPLES of them the gauge divides the streaks' contrast
+    percentile by theirs, carried to the streaks' population of sizes by the model's
+    factor (round trip: the true E_r from samples lifted by 4 %, whatever the model would
+    say of their population), before that by the model's reference."""
+    from raingauge.gauge.gauge import BRIGHTNESS_PERCENTILE, PROBE_FOCUS_SAMPLES, focus_percentile
+
+    rng = np.random.default_rng(9)
+    g = RainGauge(CAM, velocity_model="gunn_kinzer")
+    e_b, contrast = 40.0, 160.0
+
+    def lifted(n):
+        # the model's focus population, lifted by 4 % by the overlapping rain
+        return 1.04 * _focus_population(n, rng)
+
+    b = e_b + rng.normal(0.0, 0.5, 1500)
+    g._brightness.extend(b, b + contrast * lifted(b.size))
+    model = g.drop_brightness_estimate_dn
+    q_model = g.volume.brightness_q_at(g._median_noise(), contrast)
+    q_true = _fixed_point_by_search(_focus_population(200_000, rng), g.volume.q_min, BRIGHTNESS_PERCENTILE)
+    assert model - e_b == pytest.approx(1.04 * contrast * q_true / q_model, rel=0.01)
+    # the probe's drops: the same population as the model carries it to its own sizes
+    factor = g.volume.brightness_q_population_factor(g._median_noise(), contrast, g.probe.radius_range)
+    assert 0.5 < factor < 2.0 and factor != 1.0
+    probe_q = lifted(PROBE_FOCUS_SAMPLES - 1) / factor
+    g._probe_focus.extend(probe_q, np.ones(probe_q.size))
+    assert g.drop_brightness_estimate_dn == model            # too few yet
+    more = lifted(1500) / factor
+    g._probe_focus.extend(more, np.ones(more.size))
+    est = g.drop_brightness_estimate_dn
+    assert est - e_b == pytest.approx(contrast, rel=0.015)
+    assert abs(est - e_b - contrast) < abs(model - e_b - contrast) / 2
+    q_all = np.concatenate([probe_q, more])
+    q_ref = g._brightness_q_of_contrast()[0]
+    assert q_ref(contrast) == pytest.approx(focus_percentile(q_all, q_min=g.volume.q_min) * factor, rel=1e-9)
+    # without the probe the model's reference stays
+    g2 = RainGauge(CAM, velocity_model="gunn_kinzer", completeness_probe=False)
+    g2._brightness.extend(*g._brightness.arrays())
+    g2._probe_focus.extend(q_all, np.ones(q_all.size))
+    assert g2.drop_brightness_estimate_dn == pytest.approx(model, rel=1e-9)
+
+
 def test_gauge_estimates_the_drop_brightness_over_a_bright_noisy_sky():
     """Over a bright sky (E_r - E_b about 80 gray levels) with noise 3 the errors of the
     measured focus lift the brightness samples more than at the volume's nominal contrast:

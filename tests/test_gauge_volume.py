@@ -351,6 +351,41 @@ def test_brightness_reference_from_the_model(volume):
                                                               + volume.brightness_q_by_noise[2]))
 
 
+def test_population_factor_carries_the_probes_sizes_to_the_models(volume):
+    """The factor from the completeness probe's population (uniform in log a over its
+    sizes) to the model's (Marshall-Palmer): at a node of the grid the ratio of the two
+    fixed points computed directly on the model's parts (independent computation), 1 when
+    the probe's sizes are the model's prior restricted to one radius, linear between the
+    nodes, and larger than 1 against a faint backdrop at high noise, where the many small
+    drops of the Marshall-Palmer population measure their focus with larger errors."""
+    from raingauge.gauge.volume import BRIGHTNESS_Q_NODES, _Q_GRID_COARSE, _brightness_percentile_q
+
+    span = (0.15e-3, 2.8e-3)
+    c0 = volume.contrast_dn
+    node, i_n = -2, 1
+    parts = [(a, wt[i_n, node - BRIGHTNESS_Q_NODES[0]], q[i_n, node - BRIGHTNESS_Q_NODES[0]],
+              sq[i_n, node - BRIGHTNESS_Q_NODES[0]]) for a, wt, q, sq in volume._q_node_parts]
+    direct = (_brightness_percentile_q(parts, volume.q_min, y=_Q_GRID_COARSE)
+              / _brightness_percentile_q(parts, volume.q_min, y=_Q_GRID_COARSE, flat_between=span))
+    c_node = c0 * 2.0 ** (0.5 * node)
+    f_node = volume.brightness_q_population_factor(float(volume.noises_dn[i_n]), c_node, span)
+    assert f_node == pytest.approx(direct, rel=1e-9)
+    # one radius alone: both populations are that radius's
+    a1 = float(volume.radii_m[len(volume.radii_m) // 2])
+    one = (a1 * 0.999, a1 * 1.001)
+    parts1 = [p for p in parts if one[0] <= p[0] <= one[1]]
+    assert _brightness_percentile_q(parts1, volume.q_min, y=_Q_GRID_COARSE) == pytest.approx(
+        _brightness_percentile_q(parts1, volume.q_min, y=_Q_GRID_COARSE, flat_between=one), rel=1e-12)
+    # halfway between two contrast nodes: the mean of the two
+    c_a, c_b = c0 * 2.0 ** (0.5 * -3), c0 * 2.0 ** (0.5 * -2)
+    noise = float(volume.noises_dn[i_n])
+    mid = volume.brightness_q_population_factor(noise, c_a * 2.0 ** 0.25, span)
+    assert mid == pytest.approx(0.5 * (volume.brightness_q_population_factor(noise, c_a, span)
+                                       + volume.brightness_q_population_factor(noise, c_b, span)), rel=1e-9)
+    faint = volume.brightness_q_population_factor(float(volume.noises_dn[-1]), 0.25 * c0, span)
+    assert faint > 1.0
+
+
 def test_wind_dims_each_size_as_its_streak_slants(volume):
     """A drop drifting at u across its fall v(a) draws a streak slanted by u / v(a) and
     crosses each pixel faster: the simulator's exposure integral (render_streaks) gives the

@@ -206,6 +206,10 @@ MATURE_BRIGHTNESS_SAMPLES = 30
 #: pieces of defocused drops, and the estimate needs ~100 focused ones) [-].
 BRIGHTNESS_SAMPLES = 2000
 
+#: Focus samples of the completeness probe's drops from which their percentile replaces
+#: the model's reference q_ref in the drop brightness E_r (:meth:`RainGauge._drop_brightness`) [-].
+PROBE_FOCUS_SAMPLES = 400
+
 #: Per-pixel signal to noise of a streak's change below which its width and ends scatter
 #: beyond the velocity law's tolerance (dark scenes: drops read ~2.3 and are counted;
 #: a mid-gray scene at 3 gray levels of noise: ~1.3 and most are lost).
@@ -450,6 +454,42 @@ def _percentile_of_sorted(s: np.ndarray, lo: int, percentile: float) -> float:
     return b - (b - a) * (1.0 - t) if t >= 0.5 else a + (b - a) * t
 
 
+def focus_percentile(q, weights=None, *, q_min: float = 0.6, percentile: float = 75.0,
+                     iterations: int = 50) -> float:
+    """The fixed point m = P{ q' : q' >= q_min m } of measured photometric focus values q'
+    [-] (weighted: the percentile of the weights' distribution, linear between the sorted
+    values), the sample counterpart of the model's
+    :func:`raingauge.gauge.volume._brightness_percentile_q`; NaN without samples.  With
+    equal weights it is the fixed point :func:`drop_brightness_dn` takes of contrasts."""
+    q = np.asarray(q, dtype=np.float64).ravel()
+    w = np.ones_like(q) if weights is None else np.asarray(weights, dtype=np.float64).ravel()
+    ok = np.isfinite(q) & np.isfinite(w) & (w > 0)
+    q, w = q[ok], w[ok]
+    if q.size == 0:
+        return float("nan")
+    order = np.argsort(q, kind="stable")
+    q, w = q[order], w[order]
+    cw = np.cumsum(w)
+
+    def pct(lo: int) -> float:
+        # the weighted percentile of q[lo:], each sample at the middle of its weight
+        c = cw[lo:] - (cw[lo - 1] if lo > 0 else 0.0)
+        mid = c - 0.5 * w[lo:]
+        return float(np.interp(percentile / 100.0 * c[-1], mid, q[lo:]))
+
+    m = pct(0)
+    for _ in range(int(iterations)):
+        lo = int(np.searchsorted(q, q_min * m, side="left"))
+        if lo >= q.size:
+            break
+        m_new = pct(lo)
+        if abs(m_new - m) <= 1e-5 * max(abs(m), 1.0):
+            m = m_new
+            break
+        m = m_new
+    return m
+
+
 class _SampleRing:
     """The latest ``size`` pairs (E_b, E_r estimate) of law-abiding streaks, in two
     preallocated arrays; ``version`` changes with every addition.  Only order-free
@@ -609,6 +649,8 @@ class RainGauge:
         self._noise_median = (0, None)                  # (frames logged, median of the log) when last taken
         self._sharpness: deque = deque(maxlen=int(max(10 * profile.frame_rate_hz, 10)))
         self._brightness = _SampleRing(BRIGHTNESS_SAMPLES)   # (E_b, E_r estimate) of law-abiding streaks
+        # (q', weight) of the completeness probe's measured drops (their own E_r is known)
+        self._probe_focus = _SampleRing(BRIGHTNESS_SAMPLES)
         #: why measured streaks were not counted (diagnostics)
         self.rejections: Counter = Counter()
         self._dilated = None
@@ -856,7 +898,8 @@ class RainGauge:
         self._pending.append((entry, prepared))
         self._last_t = t
         if probing:
-            self._run_probe((prev, cur, nxt), raws if u8 else None, slope, vol, t, ref_bg=ref_bg,
+            self._run_probe((prev, cur, nxt), raws if u8 else None, slope, vol, t, (labels, stats, prepared),
+                            ref_bg=ref_bg,
                             contrast=contrast, hist=entry[4], noise_dn=self._frame_noise_change / math.sqrt(1.5))
         if self.defocus_model != "uniform" or (self._brightness_known(MATURE_BRIGHTNESS_SAMPLES) and
                                                (self.probe is None or self.probe.mature)):
@@ -923,10 +966,22 @@ class RainGauge:
             return float(np.median(self._law_drifts))
         return 0.0
 
-    def _run_probe(self, frames, raws, slope, vol, t, *, ref_bg, contrast, hist, noise_dn) -> None:
+    def _run_probe(self, frames, raws, slope, vol, t, frame_streaks, *, ref_bg, contrast, hist,
+                   noise_dn) -> None:
         """Inject the completeness probe's artificial drops into crops of this frame, run them
-        through the frame's detection, measurement and tests, and log which pass
-        (:class:`raingauge.gauge.completeness.CompletenessProbe`)."""
+        through the frame's detection, measurement and tests, and log what the gauge makes
+        of them (:class:`raingauge.gauge.completeness.CompletenessProbe`).
+        ``frame_streaks``: the frame's own (labels, stats, measured streaks).
+
+        Each crop is grown to hold whole the frame's streaks reaching into it
+        (:meth:`CompletenessProbe.enlarge`).  A drop merged with streaks of the frame is
+        credited with its share of the merged blob: when those streaks were counted alone
+        (drops of the rain), the blob is split fairly between them, each with its own part
+        and half of what the merge gained or lost, (s_blob - s_streaks + s_drop) / 2, s_drop
+        what the drop counts for alone (the model's expectation times the probe's ratio), so
+        that over all drops the credits add up to what the gauge counts; otherwise (streaks
+        not counted alone are no drops of the sample volume) the drop takes the blob."""
+        frame_labels, stats, frame_prepared = frame_streaks
         probe = self.probe
         prof = self.profile
         f = prof.focal_length_px
@@ -943,6 +998,7 @@ class RainGauge:
         plan = probe.plan(prof.shape, slope, drift_m_s=drift)
         if not plan:
             return
+        probe.enlarge(plan, stats, prof.shape)
         lin, raw, centres = probe.canvas(frames, plan, min(e_r, self._white_dn), raws=raws,
                                          delinearize=prof.delinearize, noise_dn=noise_dn)
         spike = tuple(raw) if raw is not None else spike_image(*lin)
@@ -976,36 +1032,110 @@ class RainGauge:
         # what the gauge makes of each injected drop: its share of the rate,
         # (2 a)^3 v / kappa(a) with a, v and kappa as measured (0 when it is not counted)
         estimate = np.zeros(len(plan))
+        # the measured focus of the drops, weighted to drops spread uniformly in log a over
+        # the probe's sizes (each class has as many drops, over its own span of log a) and
+        # over the depths (each drop stands for the volume (z / f)^2 Z of its depth span)
+        e_inj = min(e_r, self._white_dn)
+        focus_q, focus_w = [], []
+        lo, hi = probe.class_bounds
+        span_log = np.log(hi / lo)
+        pop_w = (span_log[[p["class"] for p in plan]]
+                 * np.array([(p["depth_m"] / f) ** 2 * p["span_m"] for p in plan]))
+        def share(c):
+            # the rain share of a measured streak as the gauge counts it (0: not counted)
+            a = self._drop_radius(c, e_r, vol)
+            if a is None:
+                return 0.0
+            kap = float(vol.kappa(a, weights=weights, noise_dn=noise_dn, wind_m_s=wind))
+            if not kap >= floor:
+                return 0.0
+            v = c["mot"] * float(vol.depth_m(a)) / (f * prof.exposure_s)
+            return (2.0 * a) ** 3 * v / kap
+
+        def focus_sample(c, j):
+            # a measured streak's focus q' against the brightness its drop was drawn with
+            if c["photo"] is not None and c["w_app"] >= 2.5:
+                ib, total = c["photo"]
+                focus_q.append(4.0 * total / (math.pi * c["w_app"] ** 2) / (e_inj - ib))
+                focus_w.append(pop_w[j])
+
+        # the blob each drop lies in (the label most of its axis crosses) and the frame's
+        # streaks merged in it (the frame's labels under the blob's pixels)
+        blob = np.zeros(len(plan), np.int64)
+        partners = [()] * len(plan)
+        for j, p in enumerate(plan):
+            cx0, _, cw, ch = p["canvas_box"]
+            x0, y0 = p["box"][0], p["box"][1]
+            (ax, ay), (bx, by) = p["p0"], p["p1"]
+            u = np.linspace(0.0, 1.0, max(int(p["motion_px"]) + 1, 3))
+            col = np.clip(np.rint(ax + u * (bx - ax)).astype(int) - x0, 0, cw - 1)
+            row = np.clip(np.rint(ay + u * (by - ay)).astype(int) - y0, 0, ch - 1)
+            on = lab_c[row, cx0 + col]
+            on = on[on > 0]
+            if on.size == 0:
+                continue
+            vals, cnt = np.unique(on, return_counts=True)
+            b = int(vals[np.argmax(cnt)])
+            blob[j] = b
+            if st_c[b, 4] <= 0:
+                continue
+            bx0, by0, bw, bh = (int(v) for v in st_c[b, :4])
+            yy, xx = np.nonzero(lab_c[by0:by0 + bh, bx0:bx0 + bw] == b)
+            fy = yy + by0 + y0
+            fx = xx + bx0 - cx0 + x0
+            inside = (fy >= 0) & (fy < frame_labels.shape[0]) & (fx >= 0) & (fx < frame_labels.shape[1])
+            under = frame_labels[fy[inside], fx[inside]]
+            partners[j] = tuple(int(v) for v in np.unique(under[under > 0]))
+        merged = np.array([bool(pr) for pr in partners])
+        frame_share = {}
+        if merged.any():
+            by_label = {c["label"]: c for c in frame_prepared if "label" in c}
+            for lab in {v for pr in partners for v in pr}:
+                frame_share[lab] = share(by_label[lab]) if lab in by_label else 0.0
+        ratios = probe.class_ratios()[0] if probe.mature else None
         if np.any(st_c[1:, 4] > 0):
             cx = np.array([c[0] for c in centres])
             cy = np.array([c[1] for c in centres])
-            # a streak measured of an injected drop lies on it (a real drop of frame n is
-            # rarely whole and counted within that reach of it)
+            # a streak measured of an unmerged injected drop lies on it (a real drop of frame
+            # n is rarely whole and counted within that reach of it)
             reach_y = np.array([0.25 * p["motion_px"] + 2.0 for p in plan])
             reach_x = np.array([p["radius_px"] + 2.0 + 0.25 * abs(p["p1"][0] - p["p0"][0]) for p in plan])
-            # only the labels whose box meets an injected drop's reach can be matched to one:
-            # the frame's own streaks in the crops are not measured
+            # only the merged blobs and the labels whose box meets an injected drop's reach
+            # can be matched to one: the frame's own streaks in the crops are not measured
             sx, sy = st_c[:, 0:1].astype(float), st_c[:, 1:2].astype(float)
             ex, ey = sx + st_c[:, 2:3], sy + st_c[:, 3:4]
             keep = ((sx <= cx + reach_x) & (ex - 1 >= cx - reach_x)
                     & (sy <= cy + reach_y) & (ey - 1 >= cy - reach_y)).any(axis=1)
+            keep[blob[merged]] = True
             # (the 8-bit canvases of a linear camera are the float ones' numbers)
             canvas = raw if raw is not None else lin
             prepared, _ = self._measure_table(lab_c, st_c, canvas, canvas[0], canvas[1], t, ref_bg=ref_bg,
                                               contrast=contrast, probe=True, keep=keep)
+            blob_share = {}
+            merged_blobs = set(blob[merged].tolist())
             for c in prepared:
-                near = np.flatnonzero((np.abs(cx - c["xc"]) <= reach_x) & (np.abs(cy - c["yc"]) <= reach_y))
+                if c["label"] in merged_blobs:
+                    blob_share[c["label"]] = blob_share.get(c["label"], 0.0) + share(c)
+                    focus_sample(c, int(np.flatnonzero(merged & (blob == c["label"]))[0]))
+                    continue
+                near = np.flatnonzero((np.abs(cx - c["xc"]) <= reach_x) & (np.abs(cy - c["yc"]) <= reach_y)
+                                      & ~merged)
                 if near.size == 0:
                     continue
                 j = int(near[np.argmin(np.hypot(cx[near] - c["xc"], cy[near] - c["yc"]))])
-                a = self._drop_radius(c, e_r, vol)
-                if a is None:
-                    continue
-                kap = float(vol.kappa(a, weights=weights, noise_dn=noise_dn, wind_m_s=wind))
-                if not kap >= floor:
-                    continue
-                v = c["mot"] * float(vol.depth_m(a)) / (f * prof.exposure_s)
-                estimate[j] += (2.0 * a) ** 3 * v / kap
+                focus_sample(c, j)
+                estimate[j] += share(c)
+            for j in np.flatnonzero(merged):
+                s_blob = blob_share.get(int(blob[j]), 0.0)
+                s_streaks = sum(frame_share[v] for v in partners[j])
+                if s_streaks > 0:
+                    r = float(ratios[plan[j]["class"]]) if ratios is not None else 1.0
+                    s_drop = expected[j] * (r if np.isfinite(r) else 1.0)
+                    estimate[j] = 0.5 * (s_blob - s_streaks + s_drop)
+                else:
+                    estimate[j] = s_blob
+        if focus_q:
+            self._probe_focus.extend(focus_q, focus_w)
         probe.record(plan, estimate, expected, p_pass, t_s=t)
 
     def _resolve_pending(self) -> None:
@@ -1150,7 +1280,7 @@ class RainGauge:
                              "xc": float(xc[k]), "yc": float(yc[k]), "photo": (float(ib[n]), float(total[n])),
                              "p_overlap": float(p_over[n]), "blur_px": float("nan"),
                              "width_px": float(w_app[k]), "chi2": float(tab["chi2"][k]),
-                             "slope": float(slope[k])})
+                             "slope": float(slope[k]), "label": int(tab["label"][k])})
         return prepared, rejected
 
     def _overlap_probabilities(self, labels, valid, tab, idx, stats=None) -> np.ndarray:
@@ -1384,11 +1514,35 @@ class RainGauge:
         return self.fixed_drop_brightness_dn is not None or len(self._brightness) >= n_samples
 
     def _brightness_q_of_contrast(self):
-        """The sample volume's q_ref (:meth:`~raingauge.gauge.volume.SampleVolume.brightness_q_at`)
+        """The reference q_ref of the drop brightness E_r (:func:`drop_brightness_dn`) and a
+        key of it.
+
+        The sample volume's q_ref (:meth:`~raingauge.gauge.volume.SampleVolume.brightness_q_at`)
         at the median noise of the recent frames, as a function of the drop contrast [gray
-        levels] (None: the volume's nominal contrast), and a key of it."""
+        levels]; once the completeness probe measured :data:`PROBE_FOCUS_SAMPLES` of its
+        drops, the same percentile of their measured focus q' (:func:`focus_percentile`;
+        their E_r is the one they were drawn with) instead, carried from the probe's
+        population of sizes (uniform in log a) to the model's by the model's own ratio
+        (:meth:`~raingauge.gauge.volume.SampleVolume.brightness_q_population_factor`; the
+        probe's share of small drops is far smaller, and its percentile far steadier).  In
+        heavy rain a streak is often lit further by the drops it overlaps, and the streaks'
+        percentile rises above the model's (the estimate of E_r from the model's reference
+        ran 3-5 % high at 100 mm/h); the probe's drops, overlapping the same rain, rise
+        alike."""
         vol = self.volume
         noise = self._median_noise()
+        ring = self._probe_focus
+        if self.probe is not None and len(ring) >= PROBE_FOCUS_SAMPLES:
+            cached = getattr(self, "_probe_q_cache", None)
+            if cached is None or cached[0] != ring.version:
+                q, w = ring.arrays()
+                self._probe_q_cache = (ring.version, focus_percentile(q, w, q_min=vol.q_min,
+                                                                      percentile=BRIGHTNESS_PERCENTILE))
+            q_emp = self._probe_q_cache[1]
+            span = self.probe.radius_range
+            if np.isfinite(q_emp) and q_emp > 0 and np.isfinite(span[0]):
+                return ((lambda c: q_emp * vol.brightness_q_population_factor(noise, c, span)),
+                        ("probe", ring.version, id(vol), noise))
         return (lambda c: vol.brightness_q_at(noise, c)), (id(vol), noise)
 
     def _median_noise(self) -> float | None:

@@ -316,17 +316,21 @@ _Q_GRID_COARSE = np.linspace(0.0, 2.0, 201)
 
 
 def _brightness_percentile_q(parts, q_min: float, *, percentile: float = BRIGHTNESS_PERCENTILE,
-                             y: np.ndarray | None = None) -> float:
+                             y: np.ndarray | None = None, flat_between=None) -> float:
     """The fixed point m = P{ q' : q' >= q_min m } of the model's measured focus q' [-].
 
     ``parts``: (radius a [m], law-abiding weight over z [m^3/px^2], q(z), sigma_q(z)) per
-    radius of the grid; the sizes are weighted by a Marshall-Palmer prior, each depth's q'
-    is normal about q(z) with its standard error.
+    radius of the grid; the sizes are weighted by a Marshall-Palmer prior (or, with
+    ``flat_between`` = (lo, hi) [m], uniformly in log a between those radii), each depth's
+    q' is normal about q(z) with its standard error.
     """
     from raingauge.physics.drops import MarshallPalmer
 
     radii = np.array([p[0] for p in parts])
-    prior = MarshallPalmer(BRIGHTNESS_PRIOR_RATE_MM_H).number_density(2.0 * radii)
+    if flat_between is None:
+        prior = MarshallPalmer(BRIGHTNESS_PRIOR_RATE_MM_H).number_density(2.0 * radii)
+    else:
+        prior = ((radii >= flat_between[0]) & (radii <= flat_between[1])) / radii
     # the radius grid is log-spaced: da is proportional to a
     size_w = prior * radii
     y = np.linspace(0.0, 2.0, 801) if y is None else y
@@ -731,19 +735,42 @@ class SampleVolume:
         factor = (1.0 - t) * at(k) + (t * at(k + 1) if t > 0.0 else 0.0)
         return float(base * factor)
 
-    def _brightness_q_node(self, node: int, i_noise: int) -> float:
+    def brightness_q_population_factor(self, noise_dn, contrast_dn, flat_between) -> float:
+        """q_ref of the Marshall-Palmer population of :attr:`brightness_q` over that of drops
+        spread uniformly in log a between the radii ``flat_between`` = (lo, hi) [m], at a
+        frame noise and a drop contrast E_r - E_b [gray levels] (both from the same grid of
+        depths and q', linear between its nodes) [-].  The completeness probe measures the
+        second population's percentile in the frames; this factor carries it to the first."""
+        if self.defocus_model != "uniform" or not self._q_node_parts:
+            return 1.0
+        c = self.contrast_dn if contrast_dn is None or not np.isfinite(contrast_dn) else float(contrast_dn)
+        x = 2.0 * math.log2(max(c, 1.0) / self.contrast_dn)
+        x = min(max(x, float(BRIGHTNESS_Q_NODES[0])), float(BRIGHTNESS_Q_NODES[1]))
+        k = min(math.floor(x), BRIGHTNESS_Q_NODES[1] - 1)
+        t = x - k
+        i_n, tn = self._noise_bracket(None if noise_dn is None else float(noise_dn))
+        span = (float(flat_between[0]), float(flat_between[1]))
+        out = 0.0
+        for node, wc in ((k, 1.0 - t), (k + 1, t)):
+            for i, wn in ((i_n, 1.0 - tn), (i_n + 1, tn)):
+                if wc > 0.0 and wn > 0.0:
+                    flat = self._brightness_q_node(node, i, span)
+                    out += wc * wn * self._brightness_q_node(node, i) / flat
+        return float(out)
+
+    def _brightness_q_node(self, node: int, i_noise: int, flat_between=None) -> float:
         """The percentile of q' (:func:`_brightness_percentile_q`, on every
         :data:`P_TABLE_STRIDE`-th depth and a coarser grid of q') at the contrast
         ``contrast_dn`` 2^(node / 2) and the noise ``noises_dn[i_noise]`` [-], computed
         when first asked for."""
-        key = (node, i_noise)
+        key = (node, i_noise, flat_between)
         hit = self._q_nodes.get(key)
         if hit is not None:
             return hit
         j = node - BRIGHTNESS_Q_NODES[0]
         val = float(_brightness_percentile_q([(a, wt[i_noise, j], q[i_noise, j], sq[i_noise, j])
                                               for a, wt, q, sq in self._q_node_parts], self.q_min,
-                                             y=_Q_GRID_COARSE))
+                                             y=_Q_GRID_COARSE, flat_between=flat_between))
         self._q_nodes[key] = val
         return val
 
