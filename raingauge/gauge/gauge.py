@@ -1004,7 +1004,8 @@ class RainGauge:
         spike = tuple(raw) if raw is not None else spike_image(*lin)
         lab_c, st_c = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope,
                                      slopes=self._frame_slopes, grow=vol.grow)
-        # a drop merged with a streak the crop cuts is lost, as it would be in the frame
+        # a drop merged with what the grown crop still cuts (a blob many times its size, a
+        # streak the frame's edge cuts) is lost, as it would be in the frame
         st_c = st_c.copy()
         st_c[probe.cut_components(st_c, plan), 4] = 0
         weights = self.volume.histogram_weights(hist, min(e_r, self._white_dn))
