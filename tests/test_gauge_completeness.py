@@ -255,19 +255,27 @@ def test_canvas_adds_the_eq17_streak_to_frame_n_only(volume):
     assert np.array_equal(prev, nxt)
     change = cur - prev
     assert change.min() >= -1e-4
-    x = 2
+    placed = np.zeros(prev.shape, bool)
     for p, (cx, cy) in zip(plan, centres):
         x0, y0, cw, ch = p["box"]
-        assert np.array_equal(prev[:ch, x:x + cw], bg[y0:y0 + ch, x0:x0 + cw])
-        part = change[:ch, x:x + cw]
-        contrast = 200.0 - prev[:ch, x:x + cw]
+        x, y, w, h = p["canvas_box"]
+        assert (w, h) == (cw, ch)
+        # the crops do not overlap, and keep clear of each other (nothing detected between)
+        assert not placed[max(y - 2, 0):y + ch + 2, max(x - 2, 0):x + cw + 2].any()
+        placed[y:y + ch, x:x + cw] = True
+        assert np.array_equal(prev[y:y + ch, x:x + cw], bg[y0:y0 + ch, x0:x0 + cw])
+        part = change[y:y + ch, x:x + cw]
+        contrast = 200.0 - prev[y:y + ch, x:x + cw]
         beta = part / contrast
         assert beta.sum() == pytest.approx(p["area_px"], rel=1e-3)
         # the streak is centred where the canvas says
         yy, xx = np.nonzero(beta > 0)
         assert np.average(xx + x, weights=beta[yy, xx]) == pytest.approx(cx, abs=0.05)
-        assert np.average(yy, weights=beta[yy, xx]) == pytest.approx(cy, abs=0.05)
-        x += cw + 2
+        assert np.average(yy + y, weights=beta[yy, xx]) == pytest.approx(cy, abs=0.05)
+    # nothing changes outside the crops
+    assert np.all(change[~placed] == 0)
+    # packed in shelves, the canvas is not much larger than its crops
+    assert prev.size <= 1.6 * placed.sum()
 
 
 def test_correction_is_one_until_mature_then_the_measured_ratio(volume):

@@ -36,21 +36,28 @@ def heavy():
     return frames, truth
 
 
-def test_heavy_rain_rate_within_tolerance(heavy):
-    """40 mm/h on a dark background, gauge on the simulator's velocity law: the 4-s rate
-    agrees with the truth (Eq. 28 over the drops the simulator generated) within 35 %
-    (counting noise of ~40 drops), its 95 % interval covers the truth, Dm within 30 % of the DSD's."""
-    frames, truth = heavy
-    g, recs = _run(frames, window_s=4.0, step_s=4.0, velocity_model="gunn_kinzer")
+@pytest.fixture(scope="module")
+def heavy_long():
+    sim = pytest.importorskip("raingauge.render.simulator")
+    return sim.render_clip(CAM, seconds=12.0, rain_rate_mm_h=40.0, seed=11)
+
+
+def test_heavy_rain_rate_within_tolerance(heavy_long):
+    """40 mm/h on a dark background, gauge on the simulator's velocity law: the 12-s rate
+    agrees with the truth (Eq. 28 over the drops the simulator generated) within 25 %
+    (about 180 drops, a few large ones carrying much of the rain: the rate's own sampling
+    error is about 13 %), its 95 % interval covers the truth, Dm within 30 % of the DSD's."""
+    frames, truth = heavy_long
+    g, recs = _run(frames, window_s=12.0, step_s=12.0, velocity_model="gunn_kinzer")
     assert len(recs) == 1
     rec = recs[0]
     true_rate = truth["rain_rate_mm_h"]
-    assert rec["rain_rate_mm_h"] / true_rate == pytest.approx(1.0, abs=0.35)
+    assert rec["rain_rate_mm_h"] / true_rate == pytest.approx(1.0, abs=0.25)
     lo, hi = rec["rain_rate_ci95_mm_h"]
     assert lo <= true_rate <= hi
-    assert rec["drops_counted"] > 25
+    assert rec["drops_counted"] > 100
     # Dm of the distribution the drops were drawn from (the truth's small reference box
-    # holds too few large drops in 4 s to fix Dm); 40 drops here, 60-s clips in benchmarks/
+    # holds too few large drops in 12 s to fix Dm); 180 drops here, 60-s clips in benchmarks/
     from raingauge.physics.drops import MarshallPalmer, dsd_moments_continuous
 
     dsd_dm = dsd_moments_continuous(MarshallPalmer(40.0), velocity_model="gunn_kinzer")["dm_mm"]

@@ -91,6 +91,16 @@ from collections import deque
 
 import numpy as np
 
+
+def _clip(x, lo, hi):
+    """``np.clip`` without the cost of its Python wrapper (called per streak)."""
+    if lo is not None:
+        x = np.maximum(x, lo)
+    if hi is not None:
+        x = np.minimum(x, hi)
+    return x
+
+
 __all__ = ["CompletenessProbe", "CLASS_EDGES_M"]
 
 #: Edges of the probe's radius classes [m] (drop diameters 0.3-5.6 mm).
@@ -99,6 +109,13 @@ CLASS_EDGES_M = np.array([0.15e-3, 0.25e-3, 0.4e-3, 0.6e-3, 0.9e-3, 1.4e-3, 2.8e
 #: Clear margin around an injected streak inside its crop [px] (the detection's smoothing,
 #: the measurement's flanks and the edge margin fit in it).
 CROP_MARGIN_PX = 12
+
+#: Clear columns between crops side by side in the probe's canvas [px], and clear rows
+#: between its shelves of crops: more than the detection's reach along the fall (its
+#: smoothing, its growth along the column and the gap it merges the pieces of a streak
+#: across), so that nothing in one crop meets another.
+CANVAS_GAP_PX = 2
+CANVAS_GAP_ROWS = 16
 
 #: A crop grows to hold the frame's components reaching into it up to this many times its
 #: height or width (:meth:`CompletenessProbe.enlarge`) [-].
@@ -316,46 +333,67 @@ class CompletenessProbe:
         """
         from raingauge.render.simulator import compose_rain, render_streaks
 
-        gap = 2
-        H = max(p["box"][3] for p in plan)
-        W = sum(p["box"][2] for p in plan) + gap * (len(plan) + 1)
+        W, H = self._pack(plan)
         lin = [np.zeros((H, W), np.float32) for _ in range(3)]
         raw = None if raws is None else [np.zeros((H, W), np.uint8) for _ in range(3)]
         # the space between crops is the same in the three frames: nothing is detected there
         centres, p0, p1 = [], [], []
-        x = gap
         for p in plan:
             x0, y0, cw, ch = p["box"]
+            x, y = p["canvas_box"][:2]
             for i in range(3):
-                lin[i][:ch, x:x + cw] = frames[i][y0:y0 + ch, x0:x0 + cw]
+                lin[i][y:y + ch, x:x + cw] = frames[i][y0:y0 + ch, x0:x0 + cw]
                 if raw is not None:
-                    raw[i][:ch, x:x + cw] = raws[i][y0:y0 + ch, x0:x0 + cw]
-            p["canvas_box"] = (x, 0, cw, ch)
-            ox, oy = x - x0, -y0
+                    raw[i][y:y + ch, x:x + cw] = raws[i][y0:y0 + ch, x0:x0 + cw]
+            ox, oy = x - x0, y - y0
             p0.append((p["p0"][0] + ox, p["p0"][1] + oy))
             p1.append((p["p1"][0] + ox, p["p1"][1] + oy))
             centres.append((p["centre"][0] + ox, p["centre"][1] + oy))
-            x += cw + gap
         beta, _ = render_streaks((H, W), np.array(p0), np.array(p1), [p["radius_px"] for p in plan],
                                  [p["area_px"] for p in plan])
-        lin[1] = compose_rain(lin[1], beta, drop_brightness_dn=drop_brightness_dn)
-        on = beta > 0
-        b = np.clip(beta[on].astype(np.float64), 0.0, 1.0)
+        # only the pixels under the streaks change (the row sums leave rounding residues of
+        # 1e-15 along the rows: no pixel)
+        on = np.nonzero(beta > 1e-9)
+        cur = compose_rain(lin[1][on], beta[on], drop_brightness_dn=drop_brightness_dn)
+        b = _clip(beta[on].astype(np.float64), 0.0, 1.0)
         if noise_dn > 0 and b.size:
             # I_b + beta (E_r - I_b) over a noisy I_b keeps only (1 - beta) of its noise,
             # where the camera's pixel has all of it: the rest, 2 beta - beta^2 of the variance
-            lin[1][on] += (float(noise_dn) * np.sqrt(2.0 * b - b * b) * self._rng.standard_normal(b.size)
-                           ).astype(np.float32)
+            cur += (float(noise_dn) * np.sqrt(2.0 * b - b * b) * self._rng.standard_normal(b.size)
+                    ).astype(np.float32)
         if raw is not None:
             # the camera rounds once; the 8-bit frame n was rounded already, and rounding the
             # streak again would set a faint streak's change to a whole number of gray levels
             # everywhere along it (a change of 0.6 becomes 1 at every pixel, and is found 10 %
             # more often than a real one).  The value before the camera's rounding lies
             # anywhere within half a level of the code: drawn uniformly before rounding again
-            lin[1][on] -= self._rng.uniform(-0.5, 0.5, b.size).astype(np.float32)
-            raw[1] = delinearize(lin[1])
+            cur -= self._rng.uniform(-0.5, 0.5, b.size).astype(np.float32)
+            raw[1][on] = delinearize(cur)
             lin[1] = raw[1].astype(np.float32)
+        else:
+            lin[1][on] = cur
         return tuple(lin), (None if raw is None else tuple(raw)), centres
+
+    @staticmethod
+    def _pack(plan: list[dict], gap: int = CANVAS_GAP_PX, gap_rows: int = CANVAS_GAP_ROWS) -> tuple[int, int]:
+        """Place the crops of ``plan`` in shelves (tallest first, each shelf filled left to
+        right up to a width near the square root of their total area), ``gap`` clear
+        columns between crops side by side and ``gap_rows`` clear rows between shelves;
+        each crop's place is noted as its ``canvas_box``.  Returns the canvas's (width,
+        height)."""
+        sizes = [(p["box"][2], p["box"][3]) for p in plan]
+        area = sum((cw + gap) * (ch + gap_rows) for cw, ch in sizes)
+        limit = max(max(cw for cw, _ in sizes) + 2 * gap, int(math.ceil(math.sqrt(area))))
+        x, y, shelf, width = gap, 0, 0, 0
+        for j in sorted(range(len(plan)), key=lambda i: -sizes[i][1]):
+            cw, ch = sizes[j]
+            if x + cw + gap > limit and x > gap:
+                x, y, shelf = gap, y + shelf + gap_rows, 0
+            plan[j]["canvas_box"] = (x, y, cw, ch)
+            x += cw + gap
+            shelf = max(shelf, ch)
+            width = max(width, x)
+        return width, y + shelf
 
     @staticmethod
     def cut_components(stats, plan: list[dict]) -> np.ndarray:
@@ -368,13 +406,15 @@ class CompletenessProbe:
         out = np.zeros(stats.shape[0], bool)
         if stats.shape[0] < 2 or not plan:
             return out
-        boxes = np.array([p["canvas_box"] for p in plan], dtype=float)
-        order = np.argsort(boxes[:, 0])
-        boxes = boxes[order]
-        sx, sy, sw, sh = (stats[1:, i].astype(float) for i in range(4))
-        j = np.clip(np.searchsorted(boxes[:, 0], sx, side="right") - 1, 0, len(boxes) - 1)
-        bx, by, bw, bh = boxes[j].T
-        out[1:] = (sx <= bx) | (sx + sw >= bx + bw) | (sy <= by) | (sy + sh >= by + bh)
+        bx, by, bw, bh = np.array([p["canvas_box"] for p in plan], dtype=float).T
+        sx, sy, sw, sh = (stats[1:, i].astype(float)[:, None] for i in range(4))
+        # each component lies in the crop that holds its top left corner
+        inside = (sx >= bx) & (sx < bx + bw) & (sy >= by) & (sy < by + bh)
+        j = np.argmax(inside, axis=1)
+        bx, by, bw, bh = bx[j], by[j], bw[j], bh[j]
+        sx, sy, sw, sh = sx[:, 0], sy[:, 0], sw[:, 0], sh[:, 0]
+        out[1:] = ((sx <= bx) | (sx + sw >= bx + bw) | (sy <= by) | (sy + sh >= by + bh)
+                   | ~inside.any(axis=1))
         return out
 
     def due(self, frame_index: int) -> bool:
@@ -406,7 +446,7 @@ class CompletenessProbe:
         elif np.isfinite(probe_sd) and np.isfinite(rate_sd) and rate_sd > 0:
             target = PROBE_SD_SHARE * rate_sd
             k = self.interval * (target / max(probe_sd, 1e-9)) ** 2
-            self.interval = int(np.clip(np.floor(k), min(self.fastest, self.every), self.every))
+            self.interval = int(_clip(np.floor(k), min(self.fastest, self.every), self.every))
         return self.interval
 
     def record(self, plan: list[dict], estimate, expected, p_pass, t_s: float | None = None) -> None:
@@ -517,10 +557,10 @@ class CompletenessProbe:
         if not self.mature:
             return 0.0
         a = np.asarray(radius_m, dtype=float).ravel()
-        w = np.clip(np.nan_to_num(np.asarray(rate_share, dtype=float).ravel(), nan=0.0, posinf=0.0), 0.0, None)
+        w = _clip(np.nan_to_num(np.asarray(rate_share, dtype=float).ravel(), nan=0.0, posinf=0.0), 0.0, None)
         if a.size == 0 or not np.sum(w) > 0:
             return 0.0
-        k = np.clip(np.searchsorted(CLASS_EDGES_M, a, side="right") - 1, 0, CLASS_EDGES_M.size - 2)
+        k = _clip(np.searchsorted(CLASS_EDGES_M, a, side="right") - 1, 0, CLASS_EDGES_M.size - 2)
         per_class = np.bincount(k, w, minlength=CLASS_EDGES_M.size - 1) / np.sum(w)
         return float(np.sqrt(np.sum((per_class * self.class_relative_sd()) ** 2)))
 
@@ -537,6 +577,6 @@ class CompletenessProbe:
             if not ok.any():
                 self._cache = (np.array([0.0]), np.array([1.0]))
             else:
-                self._cache = (np.log(centres[ok]), np.clip(ratio[ok], *CORRECTION_RANGE))
+                self._cache = (np.log(centres[ok]), _clip(ratio[ok], *CORRECTION_RANGE))
         x, y = self._cache
-        return np.interp(np.log(np.clip(a, 1e-9, None)), x, y)
+        return np.interp(np.log(_clip(a, 1e-9, None)), x, y)

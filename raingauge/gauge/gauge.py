@@ -131,6 +131,15 @@ from raingauge.gauge.volume import (
     whole_streak_area_px2,
 )
 
+
+def _clip(x, lo, hi):
+    """``np.clip`` without the cost of its Python wrapper (called per streak)."""
+    if lo is not None:
+        x = np.maximum(x, lo)
+    if hi is not None:
+        x = np.minimum(x, hi)
+    return x
+
 __all__ = ["RainGauge", "RECORD_KEYS", "QUALITY_FLAGS", "merge_probability"]
 
 #: Drop brightness E_r assumed before any drop was measured [gray levels] (an overcast
@@ -326,8 +335,8 @@ def merge_probability(width_px, height_px, other_widths_px, other_heights_px, sh
         # (grown by the pixel of 8-connectivity) has the area
         # (r_S + r_G + 2)(h_S + h_G + 2) + |s_S - s_G| h_S h_G
         hs1, hg1 = np.maximum(hs, 1.0), np.maximum(hg, 1.0)
-        rs = np.clip(np.asarray(area_px, dtype=float) / hs1, 1.0, np.maximum(ws, 1.0))
-        rg = np.clip(np.asarray(other_area_px, dtype=float) / hg1, 1.0, np.maximum(wg, 1.0))
+        rs = _clip(np.asarray(area_px, dtype=float) / hs1, 1.0, np.maximum(ws, 1.0))
+        rg = _clip(np.asarray(other_area_px, dtype=float) / hg1, 1.0, np.maximum(wg, 1.0))
         ss = np.maximum(ws - rs, 0.0) / hs1
         sg = np.maximum(wg - rg, 0.0) / hg1
         pair = ((rs[:, None] + rg[None, :] + 2.0) * (hs[:, None] + hg[None, :] + 2.0)
@@ -1065,13 +1074,13 @@ class RainGauge:
         blob = np.zeros(len(plan), np.int64)
         partners = [()] * len(plan)
         for j, p in enumerate(plan):
-            cx0, _, cw, ch = p["canvas_box"]
+            cx0, cy0, cw, ch = p["canvas_box"]
             x0, y0 = p["box"][0], p["box"][1]
             (ax, ay), (bx, by) = p["p0"], p["p1"]
             u = np.linspace(0.0, 1.0, max(int(p["motion_px"]) + 1, 3))
-            col = np.clip(np.rint(ax + u * (bx - ax)).astype(int) - x0, 0, cw - 1)
-            row = np.clip(np.rint(ay + u * (by - ay)).astype(int) - y0, 0, ch - 1)
-            on = lab_c[row, cx0 + col]
+            col = _clip(np.rint(ax + u * (bx - ax)).astype(int) - x0, 0, cw - 1)
+            row = _clip(np.rint(ay + u * (by - ay)).astype(int) - y0, 0, ch - 1)
+            on = lab_c[cy0 + row, cx0 + col]
             on = on[on > 0]
             if on.size == 0:
                 continue
@@ -1082,7 +1091,7 @@ class RainGauge:
                 continue
             bx0, by0, bw, bh = (int(v) for v in st_c[b, :4])
             yy, xx = np.nonzero(lab_c[by0:by0 + bh, bx0:bx0 + bw] == b)
-            fy = yy + by0 + y0
+            fy = yy + by0 - cy0 + y0
             fx = xx + bx0 - cx0 + x0
             inside = (fy >= 0) & (fy < frame_labels.shape[0]) & (fx >= 0) & (fx < frame_labels.shape[1])
             under = frame_labels[fy[inside], fx[inside]]

@@ -69,6 +69,15 @@ from raingauge.gauge.rejection import (
     velocity_log_ratio,
 )
 
+
+def _clip(x, lo, hi):
+    """``np.clip`` without the cost of its Python wrapper (called per streak)."""
+    if lo is not None:
+        x = np.maximum(x, lo)
+    if hi is not None:
+        x = np.minimum(x, hi)
+    return x
+
 __all__ = [
     "DETECTION_GROW",
     "SampleVolume",
@@ -122,7 +131,7 @@ def background_histogram(frame, *, step: int = 8, n_bins: int = 64) -> np.ndarra
     if sub.dtype.kind in "ui":
         # the 8-bit codes of a linear camera, as linearised
         sub = sub.astype(np.float32)
-    k = np.clip((sub / BACKGROUND_BIN_DN).astype(np.int64), 0, n_bins - 1)
+    k = _clip((sub / BACKGROUND_BIN_DN).astype(np.int64), 0, n_bins - 1)
     return np.bincount(k, minlength=n_bins)
 
 
@@ -376,8 +385,8 @@ def whole_streak_area_px2(motion_px, width_px, shape, *, margin_px: float = EDGE
     mot = np.asarray(motion_px, dtype=float)
     w = np.asarray(width_px, dtype=float)
     M, N = shape
-    wr = np.clip(N - w - np.abs(mot[..., 0]) - 2 * margin_px, 0, None)
-    hr = np.clip(M - w - np.abs(mot[..., 1]) - 2 * margin_px, 0, None)
+    wr = _clip(N - w - np.abs(mot[..., 0]) - 2 * margin_px, 0, None)
+    hr = _clip(M - w - np.abs(mot[..., 1]) - 2 * margin_px, 0, None)
     return wr * hr
 
 
@@ -413,12 +422,12 @@ def effective_area_rate_px2_s(motion_px, width_px, shape, *, exposure_s: float, 
     mot = np.asarray(motion_px, dtype=float)
     w = np.asarray(width_px, dtype=float)
     M, N = shape
-    wr = np.clip(N - w - np.abs(mot[..., 0]) - 2 * margin_px, 0, None)
-    hr = np.clip(M - w - np.abs(mot[..., 1]) - 2 * margin_px, 0, None)
+    wr = _clip(N - w - np.abs(mot[..., 0]) - 2 * margin_px, 0, None)
+    hr = _clip(M - w - np.abs(mot[..., 1]) - 2 * margin_px, 0, None)
     scale = frame_interval_s / exposure_s
     dx = np.abs(mot[..., 0]) * scale
     dy = np.abs(mot[..., 1]) * scale
-    overlap = np.clip(wr - dx, 0, None) * np.clip(hr - dy, 0, None)
+    overlap = _clip(wr - dx, 0, None) * _clip(hr - dy, 0, None)
     return (wr * hr - overlap) / frame_interval_s
 
 
@@ -614,9 +623,9 @@ class SampleVolume:
         if c.size == 0:
             return out
         seen = c >= self.contrasts_dn[0]
-        lc = np.log(np.clip(c[seen], self.contrasts_dn[0], self.contrasts_dn[-1]))
-        i = np.clip(np.searchsorted(grid, lc, side="right") - 1, 0, grid.size - 2)
-        t = np.clip((lc - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0)
+        lc = np.log(_clip(c[seen], self.contrasts_dn[0], self.contrasts_dn[-1]))
+        i = _clip(np.searchsorted(grid, lc, side="right") - 1, 0, grid.size - 2)
+        t = _clip((lc - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0)
         out = np.bincount(i, 1.0 - t, minlength=grid.size) + np.bincount(i + 1, t, minlength=grid.size)
         return out / c.size
 
@@ -641,9 +650,9 @@ class SampleVolume:
         c = float(drop_brightness_dn) - centres
         grid = np.log(self.contrasts_dn)
         seen = (h > 0) & np.isfinite(c) & (c >= self.contrasts_dn[0])
-        lc = np.log(np.clip(c[seen], self.contrasts_dn[0], self.contrasts_dn[-1]))
-        i = np.clip(np.searchsorted(grid, lc, side="right") - 1, 0, grid.size - 2)
-        t = np.clip((lc - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0)
+        lc = np.log(_clip(c[seen], self.contrasts_dn[0], self.contrasts_dn[-1]))
+        i = _clip(np.searchsorted(grid, lc, side="right") - 1, 0, grid.size - 2)
+        t = _clip((lc - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0)
         hs = h[seen]
         out = (np.bincount(i, hs * (1.0 - t), minlength=grid.size)
                + np.bincount(i + 1, hs * t, minlength=grid.size))
@@ -804,9 +813,9 @@ class SampleVolume:
         with np.errstate(divide="ignore"):
             lc = grid[None, :] + np.log(np.maximum(f, 1e-300))[:, None]
         seen = lc >= grid[0]
-        lc = np.clip(lc, grid[0], grid[-1])
-        i = np.clip(np.searchsorted(grid, lc.ravel(), side="right") - 1, 0, n - 2).reshape(lc.shape)
-        t = np.clip((lc - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0)
+        lc = _clip(lc, grid[0], grid[-1])
+        i = _clip(np.searchsorted(grid, lc.ravel(), side="right") - 1, 0, n - 2).reshape(lc.shape)
+        t = _clip((lc - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0)
         mass = np.where(seen, w[None, :], 0.0)
         row = (np.arange(f.size) * n)[:, None]
         out = (np.bincount((row + i).ravel(), (mass * (1.0 - t)).ravel(), minlength=f.size * n)
@@ -865,7 +874,7 @@ class SampleVolume:
                 else:
                     col = table @ self.contrast_weights([float(self.contrast_dn)])
                 self._kappa_col = (key, col)
-        k = np.interp(np.log(np.clip(a, 1e-9, None)), np.log(self.radii_m), col, left=0.0, right=col[-1])
+        k = np.interp(np.log(_clip(a, 1e-9, None)), np.log(self.radii_m), col, left=0.0, right=col[-1])
         return np.where(a >= self.min_radius_m, k, 0.0)
 
     def visible_fraction(self, radius_m, *, weights) -> np.ndarray:
@@ -887,12 +896,12 @@ class SampleVolume:
     def depth_m(self, radius_m) -> np.ndarray:
         """Mean depth of accepted drops of radius a [m]."""
         a = np.asarray(radius_m, dtype=float)
-        return np.interp(np.log(np.clip(a, 1e-9, None)), np.log(self.radii_m), self.mean_depth_m)
+        return np.interp(np.log(_clip(a, 1e-9, None)), np.log(self.radii_m), self.mean_depth_m)
 
     def depth_span(self, radius_m) -> tuple[np.ndarray, np.ndarray]:
         """(near, far) depths [m] between which a drop of radius a passes at all
         (:attr:`depth_span_m`, interpolated in log a)."""
-        la = np.log(np.clip(np.asarray(radius_m, dtype=float), 1e-9, None))
+        la = np.log(_clip(np.asarray(radius_m, dtype=float), 1e-9, None))
         lr = np.log(self.radii_m)
         return (np.interp(la, lr, self.depth_span_m[:, 0]), np.interp(la, lr, self.depth_span_m[:, 1]))
 
@@ -916,7 +925,7 @@ class SampleVolume:
         if not c >= self.contrasts_dn[0]:
             return 0.0
         lc = math.log(min(c, self.contrasts_dn[-1]))
-        ic = int(np.clip(np.searchsorted(cgrid, lc, side="right") - 1, 0, cgrid.size - 2))
+        ic = int(_clip(np.searchsorted(cgrid, lc, side="right") - 1, 0, cgrid.size - 2))
         tc = min(max((lc - cgrid[ic]) / (cgrid[ic + 1] - cgrid[ic]), 0.0), 1.0)
         nodes = self._p_nodes(radius_m, z_m, noise_dn)
         return float((1 - tc) * nodes[ic] + tc * nodes[ic + 1])
@@ -926,8 +935,8 @@ class SampleVolume:
         (node 0, weight 0 for None: the profile's noise)."""
         if noise_dn is None or not np.isfinite(noise_dn):
             return 0, 0.0
-        x = float(np.clip(noise_dn, self.noises_dn[0], self.noises_dn[-1]))
-        i_n = int(np.clip(np.searchsorted(self.noises_dn, x, side="right") - 1, 0, self.noises_dn.size - 2))
+        x = float(_clip(noise_dn, self.noises_dn[0], self.noises_dn[-1]))
+        i_n = int(_clip(np.searchsorted(self.noises_dn, x, side="right") - 1, 0, self.noises_dn.size - 2))
         return i_n, (x - self.noises_dn[i_n]) / (self.noises_dn[i_n + 1] - self.noises_dn[i_n])
 
     def _p_nodes(self, radius_m: float, z_m: float, noise_dn) -> np.ndarray:
@@ -935,7 +944,7 @@ class SampleVolume:
         (linear in log a, the noise and z) [-]."""
         la = math.log(max(float(radius_m), 1e-9))
         lr = self._log_radii
-        j = int(np.clip(np.searchsorted(lr, la, side="right") - 1, 0, lr.size - 2))
+        j = int(_clip(np.searchsorted(lr, la, side="right") - 1, 0, lr.size - 2))
         tr = min(max((la - lr[j]) / (lr[j + 1] - lr[j]), 0.0, ), 1.0)
         i_n, tn = self._noise_bracket(noise_dn)
         nodes = np.zeros(self.contrasts_dn.size)
