@@ -68,6 +68,34 @@ def test_heavy_rain_rate_within_tolerance(heavy_long):
                                                    / 3600.0, rel=0.1)
 
 
+def test_frames_wait_for_a_settled_drop_brightness(heavy, monkeypatch):
+    """The frames' drops are sized and tested with the drop brightness E_r only once
+    enough law-abiding streaks fixed it (or a record is due): steps that emit no record
+    leave them kept back, and all are counted by the record."""
+    from raingauge.gauge import gauge as gauge_module
+
+    frames, _ = heavy
+    need = gauge_module.DECIDE_BRIGHTNESS_SAMPLES
+    g = RainGauge(CAM, window_s=60.0, step_s=1.0, velocity_model="gunn_kinzer", keep_drops=True)
+    for fr in frames:
+        g.process(fr)
+        assert len(g._brightness) < need and not g.drops
+    recs = g.flush()
+    assert len(recs) == 1 and len(g.drops) == recs[0]["drops_counted"] > 25
+
+    # with a lower threshold the frames are decided as soon as it is reached (and the
+    # probe is mature), before any record
+    monkeypatch.setattr(gauge_module, "DECIDE_BRIGHTNESS_SAMPLES", 40)
+    g = RainGauge(CAM, window_s=60.0, step_s=1.0, velocity_model="gunn_kinzer", keep_drops=True)
+    decided_at = None
+    for k, fr in enumerate(frames):
+        g.process(fr)
+        if g.drops and decided_at is None:
+            decided_at = k
+            assert len(g._brightness) >= 40 and g.probe.mature
+    assert decided_at is not None and decided_at < len(frames) - 1
+
+
 def test_record_contract_and_partial_window(heavy):
     """A clip shorter than one window gives exactly one record over what there is, flagged;
     records carry exactly the contract's keys (plus the extra moments) and are JSON."""
