@@ -432,3 +432,17 @@ def test_kappa_in_a_wind_is_kappa_at_the_dimmed_contrast(volume):
         assert volume.kappa(a, weights=w, wind_m_s=0.0) == volume.kappa(a, weights=w)
     # the small drops, dimmed most, are sampled less in a wind
     assert volume.kappa(0.3e-3, weights=w, wind_m_s=3.0) < 0.8 * volume.kappa(0.3e-3, weights=w)
+
+
+def test_fast_clip_is_numpys():
+    """The per-streak clip gives np.clip's values, types and NaNs, with either bound None."""
+    from raingauge.gauge._numeric import clip
+
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=50) * 3
+    x[3] = np.nan
+    for lo, hi in ((-1.0, 2.0), (None, 0.5), (0.0, None), (2, 1)):
+        np.testing.assert_array_equal(clip(x, lo, hi), np.clip(x, lo, hi))
+    k = np.arange(-5, 6)
+    assert clip(k, 0, 3).dtype == np.clip(k, 0, 3).dtype
+    assert float(clip(7.5, 0.0, 2.0)) == 2.0 and int(clip(-3, 0, 9)) == 0

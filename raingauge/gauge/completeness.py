@@ -91,15 +91,7 @@ from collections import deque
 
 import numpy as np
 
-
-def _clip(x, lo, hi):
-    """``np.clip`` without the cost of its Python wrapper (called per streak)."""
-    if lo is not None:
-        x = np.maximum(x, lo)
-    if hi is not None:
-        x = np.minimum(x, hi)
-    return x
-
+from raingauge.gauge._numeric import clip as _clip
 
 __all__ = ["CompletenessProbe", "CLASS_EDGES_M"]
 

@@ -102,6 +102,7 @@ import numpy as np
 
 from raingauge.errors import InputError
 from raingauge.gauge import products as _products
+from raingauge.gauge._numeric import clip as _clip
 from raingauge.gauge.completeness import CompletenessProbe
 from raingauge.gauge.rejection import (
     exposure_area_px2,
@@ -130,15 +131,6 @@ from raingauge.gauge.volume import (
     effective_area_rate_px2_s,
     whole_streak_area_px2,
 )
-
-
-def _clip(x, lo, hi):
-    """``np.clip`` without the cost of its Python wrapper (called per streak)."""
-    if lo is not None:
-        x = np.maximum(x, lo)
-    if hi is not None:
-        x = np.minimum(x, hi)
-    return x
 
 __all__ = ["RainGauge", "RECORD_KEYS", "QUALITY_FLAGS", "merge_probability"]
 

@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from raingauge.gauge._numeric import clip as _clip
 from raingauge.gauge.rejection import (
     DEFAULT_BLUR_FLOOR_PX,
     DEFAULT_BLUR_RELATIVE,
@@ -68,15 +69,6 @@ from raingauge.gauge.rejection import (
     streak_errors_px,
     velocity_log_ratio,
 )
-
-
-def _clip(x, lo, hi):
-    """``np.clip`` without the cost of its Python wrapper (called per streak)."""
-    if lo is not None:
-        x = np.maximum(x, lo)
-    if hi is not None:
-        x = np.minimum(x, hi)
-    return x
 
 __all__ = [
     "DETECTION_GROW",
