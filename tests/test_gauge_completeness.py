@@ -457,6 +457,28 @@ def test_class_counts_are_the_counted_drops_against_the_models_expectation(volum
     np.testing.assert_allclose(ratio, want, atol=0.12)
 
 
+def test_canvas_without_the_linear_copies_gives_the_same_8bit_canvas(volume):
+    """The gauge of a linear 8-bit camera works on the 8-bit canvases alone and asks for no
+    linear ones (``linear=False``): the 8-bit canvases and the streaks' places are those of
+    the full call, drawn with the same random numbers."""
+    rng = np.random.default_rng(11)
+    lin_frames = tuple(rng.uniform(30.0, 120.0, CAM.shape).round().astype(np.float32) for _ in range(3))
+    raws = tuple(f.astype(np.uint8) for f in lin_frames)
+    outs = []
+    for linear in (True, False):
+        probe = _probe(volume, per_frame=16, seed=9)
+        plan = probe.plan(CAM.shape, slope=0.1)
+        outs.append(probe.canvas(lin_frames, plan, 180.0, raws=raws, delinearize=CAM.delinearize,
+                                 noise_dn=2.0, linear=linear))
+    (lin_a, raw_a, c_a), (lin_b, raw_b, c_b) = outs
+    assert lin_b is None and len(lin_a) == 3
+    for a, b in zip(raw_a, raw_b):
+        np.testing.assert_array_equal(a, b)
+    assert c_a == c_b
+    assert np.count_nonzero(raw_a[1] != raw_a[0]) > 100
+    np.testing.assert_array_equal(lin_a[1], raw_a[1].astype(np.float32))
+
+
 def test_canvas_rounds_a_faint_streak_once_and_keeps_the_pixels_noise(volume):
     """A linear camera rounds each pixel once.  Frame n's 8-bit copy was rounded already;
     the canvas draws the value within the code's rounding interval before rounding the

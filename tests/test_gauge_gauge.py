@@ -617,6 +617,35 @@ def test_gauge_estimates_the_drop_brightness_over_a_bright_noisy_sky():
     assert abs(est - 250.0) < abs(nominal - 250.0)
 
 
+def test_gauge_brightness_follows_its_samples_and_its_reference():
+    """The gauge keeps the samples' part of the drop brightness while they are unchanged and
+    the reference changes (the noise, the probe's drops): each estimate is still
+    drop_brightness_dn of the samples held and the reference of the moment, to the bit."""
+    from raingauge.gauge.gauge import BRIGHTNESS_PERCENTILE, drop_brightness_dn
+
+    rng = np.random.default_rng(5)
+    g = RainGauge(CAM, velocity_model="gunn_kinzer", completeness_probe=False)
+
+    def direct():
+        b, x = g._brightness.arrays()
+        return drop_brightness_dn(x, b, q_min=g.volume.q_min, q_ref=g._brightness_q_of_contrast()[0],
+                                  percentile=BRIGHTNESS_PERCENTILE)
+
+    seen = set()
+    for step in range(6):
+        if step % 2 == 0:
+            bg = rng.uniform(30.0, 60.0, 200)
+            g._brightness.extend(bg, bg + 150.0 * rng.uniform(0.3, 1.1, 200))
+        # a new frame noise changes the reference, not the samples
+        for _ in range(50):
+            g._noise_log.append((0.5, 4.0, 1.0, 3.0, 2.0, 6.0)[step])
+            g._n_noise += 1
+        est = g._drop_brightness()
+        assert est == direct()
+        seen.add(round(est, 9))
+    assert len(seen) >= 5
+
+
 def test_gauge_keeps_the_latest_brightness_samples():
     """The gauge's brightness samples are the latest BRIGHTNESS_SAMPLES pairs, whatever the
     batches they came in."""

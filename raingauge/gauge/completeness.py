@@ -298,7 +298,7 @@ class CompletenessProbe:
             p["box"] = (nx0, ny0, nx1 - nx0, ny1 - ny0)
 
     def canvas(self, frames, plan: list[dict], drop_brightness_dn: float, *, raws=None, delinearize=None,
-               noise_dn: float = 0.0):
+               noise_dn: float = 0.0, linear: bool = True):
         """The crops of ``plan`` from frames n-1, n, n+1 side by side, with the artificial
         streaks added to frame n's, over its rain (module docstring; Eq. 17:
         I = I_b + beta (E_r - I_b)).
@@ -316,26 +316,33 @@ class CompletenessProbe:
             Linear -> 8-bit codes (with ``raws``).
         noise_dn : float
             The frames' noise sigma [gray levels] (linear): the noise a streak's pixels keep.
+        linear : bool
+            With ``raws``: also return the linear canvases (False: lin is None, for a
+            caller that works on the 8-bit ones alone).
 
         Returns
         -------
         (lin, raw, centres): lin and raw are (prev, cur, nxt) canvases (raw None without
-        ``raws``); centres the streaks' centres (x, y) in the canvas [px].  Each crop's place
+        ``raws``, lin None with ``raws`` and not ``linear``); centres the streaks' centres (x, y) in the canvas [px].  Each crop's place
         in the canvas is noted in its plan entry as ``canvas_box`` (x, y, width, height).
         """
         from raingauge.render.simulator import compose_rain, render_streaks
 
         W, H = self._pack(plan)
-        lin = [np.zeros((H, W), np.float32) for _ in range(3)]
+        linear = linear or raws is None
+        # (frame n's linear canvas is needed for the streaks either way)
+        lin_idx = (0, 1, 2) if linear else (1,)
+        lin = [np.zeros((H, W), np.float32) if i in lin_idx else None for i in range(3)]
         raw = None if raws is None else [np.zeros((H, W), np.uint8) for _ in range(3)]
         # the space between crops is the same in the three frames: nothing is detected there
         centres, p0, p1 = [], [], []
         for p in plan:
             x0, y0, cw, ch = p["box"]
             x, y = p["canvas_box"][:2]
-            for i in range(3):
+            for i in lin_idx:
                 lin[i][y:y + ch, x:x + cw] = frames[i][y0:y0 + ch, x0:x0 + cw]
-                if raw is not None:
+            if raw is not None:
+                for i in range(3):
                     raw[i][y:y + ch, x:x + cw] = raws[i][y0:y0 + ch, x0:x0 + cw]
             ox, oy = x - x0, y - y0
             p0.append((p["p0"][0] + ox, p["p0"][1] + oy))
@@ -361,6 +368,8 @@ class CompletenessProbe:
             # anywhere within half a level of the code: drawn uniformly before rounding again
             cur -= self._rng.uniform(-0.5, 0.5, b.size).astype(np.float32)
             raw[1][on] = delinearize(cur)
+            if not linear:
+                return None, tuple(raw), centres
             lin[1] = raw[1].astype(np.float32)
         else:
             lin[1][on] = cur

@@ -402,12 +402,23 @@ def drop_brightness_dn(samples_dn, background_dn, *, q_min: float = 0.6, q_ref: 
     float
         E_r [gray levels] (median E_b plus the contrast); NaN without samples.
     """
+    median_b, e = _contrast_percentile(samples_dn, background_dn, q_min=q_min, percentile=percentile,
+                                       iterations=iterations)
+    if not np.isfinite(e):
+        return float("nan")
+    return median_b + _contrast_of_percentile(e, q_ref)
+
+
+def _contrast_percentile(samples_dn, background_dn, *, q_min: float, percentile: float,
+                         iterations: int = 50) -> tuple[float, float]:
+    """The samples' part of :func:`drop_brightness_dn`: (median E_b, the fixed point D of
+    the contrasts) [gray levels]; (NaN, NaN) without samples."""
     x = np.asarray(samples_dn, dtype=np.float64).ravel()
     b = np.asarray(background_dn, dtype=np.float64).ravel()
     ok = np.isfinite(x) & np.isfinite(b)
     x, b = x[ok], b[ok]
     if x.size == 0:
-        return float("nan")
+        return float("nan"), float("nan")
     # sorted once: the samples d >= q_min e are a tail of the sorted contrasts, and each
     # step's percentile is read off that tail
     d = np.sort(x - b)
@@ -421,8 +432,15 @@ def drop_brightness_dn(samples_dn, background_dn, *, q_min: float = 0.6, q_ref: 
             e = e_new
             break
         e = e_new
+    return float(np.median(b)), e
+
+
+def _contrast_of_percentile(e: float, q_ref) -> float:
+    """The model's part of :func:`drop_brightness_dn`: the contrast E_r - E_b from the
+    samples' fixed point D = ``e`` and the reference q_ref (a number, or a function of the
+    contrast) [gray levels]."""
     if not callable(q_ref):
-        return float(np.median(b)) + e / float(q_ref)
+        return e / float(q_ref)
     # C = e / q(C): q falls slowly with C (the map contracts), a few steps suffice
     c = e / float(q_ref(None))
     for _ in range(20):
@@ -431,7 +449,7 @@ def drop_brightness_dn(samples_dn, background_dn, *, q_min: float = 0.6, q_ref: 
             c = c_new
             break
         c = c_new
-    return float(np.median(b)) + c
+    return c
 
 
 def _mean_linear(frame: np.ndarray, step: int) -> float:
@@ -1008,7 +1026,7 @@ class RainGauge:
             return
         probe.enlarge(plan, stats, prof.shape)
         lin, raw, centres = probe.canvas(frames, plan, min(e_r, self._white_dn), raws=raws,
-                                         delinearize=prof.delinearize, noise_dn=noise_dn)
+                                         delinearize=prof.delinearize, noise_dn=noise_dn, linear=raws is None)
         spike = tuple(raw) if raw is not None else spike_image(*lin)
         lab_c, st_c = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope,
                                      slopes=self._frame_slopes, grow=vol.grow)
@@ -1575,9 +1593,15 @@ class RainGauge:
         cached = getattr(self, "_brightness_cache", None)
         if cached is not None and cached[0] == key:
             return cached[1]
-        backgrounds, samples = self._brightness.arrays()
-        e_r = drop_brightness_dn(samples, backgrounds, q_min=self.volume.q_min, q_ref=q_ref,
-                                 percentile=BRIGHTNESS_PERCENTILE)
+        # the samples' fixed point changes only with them (the reference changes more often)
+        ring_key = (self._brightness.version, self.volume.q_min)
+        part = getattr(self, "_brightness_part", None)
+        if part is None or part[0] != ring_key:
+            backgrounds, samples = self._brightness.arrays()
+            part = self._brightness_part = (ring_key, _contrast_percentile(
+                samples, backgrounds, q_min=self.volume.q_min, percentile=BRIGHTNESS_PERCENTILE))
+        median_b, e = part[1]
+        e_r = median_b + _contrast_of_percentile(e, q_ref) if np.isfinite(e) else float("nan")
         self._brightness_cache = (key, e_r)
         return e_r
 

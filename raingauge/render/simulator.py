@@ -302,8 +302,20 @@ def _span_entries(rows, xl, xr, weight, n, width):
     return flat, vals
 
 
-def _scratch(m: int, width: int):
-    """Reusable accumulation buffers for one image size (one set per thread)."""
+def _scratch(m: int, width: int, *, pooled: bool = False):
+    """Reusable accumulation buffers for one image size (one set per thread).  With
+    ``pooled`` they are views of one growing set shared by all sizes, for a caller whose
+    result does not stay a view into them (images of a new size each call, such as the
+    completeness probe's canvases, then allocate nothing)."""
+    if pooled:
+        pool = getattr(_SCRATCH, "pool", None)
+        need = ((m + 1) * (width + 1), m * width)
+        if pool is None or pool[0].size < need[0]:
+            size = int(need[0] * 1.25) + 1024
+            pool = _SCRATCH.pool = (np.empty(size, np.float64), np.empty(size, np.float64),
+                                    np.empty(size, np.float64))
+        return (pool[0][:need[1]], pool[1][:need[1]].reshape(m, width),
+                pool[2][:need[0]].reshape(m + 1, width + 1))
     cache = getattr(_SCRATCH, "buffers", None)
     if cache is None:
         cache = _SCRATCH.buffers = {}
@@ -414,7 +426,7 @@ def render_streaks(shape, p0, p1, radius_px, area_px, *, n_sub: int = 2,
     below = rb + 1 < m
     f_bot, v_bot = _span_entries(rb[below] + 1, x0[ri][below] - r[ri][below], x0[ri][below] + r[ri][below],
                                  -beta_inside[ri][below], n, width)
-    acc, diff, integral = _scratch(m, width)
+    acc, diff, integral = _scratch(m, width, pooled=not _view)
     acc.fill(0.0)
     np.add.at(acc, flat, vals)
     acc2 = acc.reshape(m, width)
