@@ -56,6 +56,17 @@ def test_heavy_rain_rate_within_tolerance(heavy_long):
     lo, hi = rec["rain_rate_ci95_mm_h"]
     assert lo <= true_rate <= hi
     assert rec["drops_counted"] > 100
+    # the interval's parts: the counting statistics (at least those of as many equal drops),
+    # the probe's sampling and the 3 % of a dark, still scene; the lower side is 1.96 times
+    # them in quadrature, the upper side (the sum's skew) at least that
+    rate = rec["rain_rate_mm_h"]
+    parts = [rec[k] for k in ("rain_rate_counting_rsd", "rain_rate_probe_rsd", "rain_rate_conditions_rsd")]
+    assert rec["rain_rate_conditions_rsd"] == pytest.approx(0.03)
+    assert 1.0 / math.sqrt(rec["drops_counted"]) <= rec["rain_rate_counting_rsd"] < 0.3
+    assert 0.0 < rec["rain_rate_probe_rsd"] < 0.3
+    total = math.hypot(*parts)
+    assert (rate - lo) / rate == pytest.approx(1.96 * total, rel=0.25)
+    assert (hi - rate) / rate >= 0.95 * 1.96 * total
     # Dm of the distribution the drops were drawn from (the truth's small reference box
     # holds too few large drops in 12 s to fix Dm); 180 drops here, 60-s clips in benchmarks/
     from raingauge.physics.drops import MarshallPalmer, dsd_moments_continuous
@@ -129,6 +140,8 @@ def test_rain_free_moving_scene_reads_near_zero():
     g, recs = _run(frames, window_s=2.0, step_s=2.0, velocity_model="gunn_kinzer")
     assert recs[-1]["rain_rate_mm_h"] < 0.05
     assert recs[-1]["intensity_class"] == "none" and recs[-1]["synop_4680"] == 0
+    if recs[-1]["drops_counted"] == 0:
+        assert recs[-1]["rain_rate_counting_rsd"] is None and recs[-1]["rain_rate_probe_rsd"] is None
 
 
 def test_quality_flags_dropped_and_overexposed_frames():

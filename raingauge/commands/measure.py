@@ -16,7 +16,11 @@ drops_counted, drops_rejected_defocus, dsd_d_mm and dsd_n_m3_mm (N(D) in the
 synop_4680, quality (flags), then nw_mm1_m3, lwc_g_m3, ke_flux_j_m2_h, z_mm6_m3,
 min_detectable_diameter_mm (the smallest drop visible against the background) and
 completed_share (the share of the rate, the spectrum and the accumulation that continues
-the counted spectrum into the sizes the background leaves uncounted; 0 when none is).
+the counted spectrum into the sizes the background leaves uncounted; 0 when none is), and
+the rate's relative standard uncertainties behind its interval: rain_rate_counting_rsd (the
+counting statistics of the drops counted), rain_rate_probe_rsd (the completeness probe's
+sampling) and rain_rate_conditions_rsd (the scatter the validation found in the window's
+conditions); null when no drop was counted.
 
 Example:
     raingauge measure rain.mkv --camera gauge-default --window 60 --step 10
@@ -119,7 +123,8 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise ConfigError(f"{exc}. Fix: choose a valid --velocity-model") from None
     keys = list(RECORD_KEYS) + ["nw_mm1_m3", "lwc_g_m3", "ke_flux_j_m2_h", "z_mm6_m3", "min_detectable_diameter_mm",
-                                "completed_share"]
+                                "completed_share", "rain_rate_counting_rsd", "rain_rate_probe_rsd",
+                                "rain_rate_conditions_rsd"]
     writer = csv.writer(sys.stdout, lineterminator="\n") if args.format == "csv" else None
     if writer is not None:
         writer.writerow(keys)

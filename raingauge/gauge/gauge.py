@@ -1768,6 +1768,9 @@ class RainGauge:
         n_frames = max(len(frames), 1)
         frame_flags = [flag for flag, share in FLAG_SHARES
                        if sum(1 for fr in frames if flag in fr[1]) > share * n_frames]
+        # the rate's relative standard uncertainties: its counting statistics, the completeness
+        # probe's sampling and the scatter the validation found in the window's conditions
+        rsd = {"counting": None, "probe": None, "conditions": None}
         if drops and duration > 0:
             # a drop seen in several frames adds a snapshot estimate from each: the counting
             # statistics are those of the distinct drops (tracks), each with its summed share
@@ -1780,9 +1783,14 @@ class RainGauge:
             noises = [fr[5] for fr in frames if len(fr) > 5 and np.isfinite(fr[5])]
             systematic = condition_uncertainty(frame_flags, float(np.median(noises)) if noises else float("nan"),
                                                self._wind_m_s())
+            counted_rate = per_drop[per_drop > 0]
+            rsd["conditions"] = systematic
+            rsd["counting"] = (float(np.sqrt(np.sum(counted_rate ** 2)) / np.sum(counted_rate))
+                               if counted_rate.size else None)
             if self.probe is not None:
                 probe_sd = self.probe.rate_relative_sd([0.5 * d["diameter_m"] for d in drops], share)
                 systematic = math.hypot(systematic, probe_sd)
+                rsd["probe"] = float(probe_sd)
             lo, hi = _products.rate_interval(per_drop[per_drop > 0],
                                              empty_scale=self._empty_scale * self.window_s / duration,
                                              systematic_rel=systematic)
@@ -1847,6 +1855,9 @@ class RainGauge:
             "z_mm6_m3": float(prod["z_mm6_m3"]),
             "min_detectable_diameter_mm": num(1e3 * d_det),
             "completed_share": 0.0 if completion is None else float(completion["rate_mm_h"] / rate),
+            "rain_rate_counting_rsd": num(rsd["counting"]),
+            "rain_rate_probe_rsd": num(rsd["probe"]),
+            "rain_rate_conditions_rsd": num(rsd["conditions"]),
         }
 
     def _completed_accumulation(self, t0: float, t1: float, completion, partial: bool) -> float:
