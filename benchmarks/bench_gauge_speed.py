@@ -113,8 +113,10 @@ def main(argv=None) -> int:
             n_st = len(frames) - s
             fps_g, fps_p, fps_m = (n_st / t for t in steady)
             rejected = sum(r["drops_rejected_defocus"] for r in recs)
+            # (the probe's interval once it runs: no drop brightness, no probe)
+            every = str(gauge.probe.interval) if gauge.probe.mature else "-"
             print(f"{rate:6.1f} {fps_start:10.1f} {fps_g:11.1f} {fps_p:9.1f} {fps_m:9.1f} {fps_g / fps_m:6.2f} "
-                  f"{gauge.probe.interval:11d} {(rejected + len(gauge.drops)) / len(frames):13.1f} "
+                  f"{every:>11} {(rejected + len(gauge.drops)) / len(frames):13.1f} "
                   f"{len(gauge.drops):8d}", flush=True)
             del frames
 
