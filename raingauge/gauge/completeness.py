@@ -323,8 +323,9 @@ class CompletenessProbe:
         Returns
         -------
         (lin, raw, centres): lin and raw are (prev, cur, nxt) canvases (raw None without
-        ``raws``, lin None with ``raws`` and not ``linear``); centres the streaks' centres (x, y) in the canvas [px].  Each crop's place
-        in the canvas is noted in its plan entry as ``canvas_box`` (x, y, width, height).
+        ``raws``, lin None with ``raws`` and not ``linear``); centres the streaks' centres
+        (x, y) in the canvas [px].  Each crop's place in the canvas is noted in its plan
+        entry as ``canvas_box`` (x, y, width, height).
         """
         from raingauge.render.simulator import compose_rain, render_streaks
 
