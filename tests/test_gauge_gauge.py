@@ -607,6 +607,50 @@ def test_drop_brightness_takes_the_probes_reference_once_it_has_enough_samples()
     assert g2.drop_brightness_estimate_dn == pytest.approx(model, rel=1e-9)
 
 
+def test_brightness_prior_follows_the_rate_counted_over_the_window():
+    """The size prior that carries the probe's focus percentile to the rain's is Marshall-
+    Palmer at the rate of the drops counted over the window, in half-octave steps, held
+    between 10 and 200 mm/h; the drop brightness's reference is the probe's percentile
+    times the factor at that rate, and a new step is a new reference."""
+    from raingauge.gauge.gauge import PROBE_FOCUS_SAMPLES, focus_percentile
+    from raingauge.gauge.volume import BRIGHTNESS_PRIOR_MAX_MM_H, BRIGHTNESS_PRIOR_RATE_MM_H
+
+    g = RainGauge(CAM, window_s=10.0, velocity_model="gunn_kinzer")
+    dt = g._frame_interval
+    n = 600                                                  # 20 s of frames: the window holds 10 s
+    for k in range(n):
+        g._frames.append((k * dt, (), 0))
+    t = (n - 1) * dt
+    n_win = sum(1 for fr in g._frames if fr[0] >= t - g.window_s - 1e-9)
+
+    def volume_sum(rate):
+        return rate * n_win * dt / (3.6e6 * math.pi / 6.0)
+
+    assert g._prior_rate == BRIGHTNESS_PRIOR_RATE_MM_H
+    assert g._window_prior_rate(t, volume_sum(40.0)) == pytest.approx(2.0 ** 5.5)   # 45.3: the nearest step
+    assert g._window_prior_rate(t, volume_sum(33.0)) == pytest.approx(32.0)
+    assert g._window_prior_rate(t, volume_sum(2.0)) == BRIGHTNESS_PRIOR_RATE_MM_H
+    assert g._window_prior_rate(t, volume_sum(5000.0)) == BRIGHTNESS_PRIOR_MAX_MM_H
+    assert g._window_prior_rate(t, 0.0) == g._prior_rate
+    # the reference of the drop brightness once the probe measured its drops
+    rng = np.random.default_rng(3)
+    q = 1.0 + 0.1 * rng.standard_normal(PROBE_FOCUS_SAMPLES + 200)
+    g._probe_focus.extend(q, np.ones(q.size))
+    for _ in range(30):
+        g._noise_log.append(2.0)
+        g._n_noise += 1
+    q_emp = focus_percentile(q, np.ones(q.size), q_min=g.volume.q_min)
+    noise, span, c = g._median_noise(), g.probe.radius_range, 120.0
+    ref10, key10 = g._brightness_q_of_contrast()
+    g._prior_rate = g._window_prior_rate(t, volume_sum(100.0))
+    ref100, key100 = g._brightness_q_of_contrast()
+    assert key100 != key10
+    assert ref10(c) == pytest.approx(q_emp * g.volume.brightness_q_population_factor(noise, c, span), rel=1e-12)
+    assert ref100(c) == pytest.approx(
+        q_emp * g.volume.brightness_q_population_factor(noise, c, span, g._prior_rate), rel=1e-12)
+    assert ref100(c) != ref10(c)
+
+
 def test_gauge_estimates_the_drop_brightness_over_a_bright_noisy_sky():
     """Over a bright sky (E_r - E_b about 80 gray levels) with noise 3 the errors of the
     measured focus lift the brightness samples more than at the volume's nominal contrast:

@@ -386,6 +386,36 @@ def test_population_factor_carries_the_probes_sizes_to_the_models(volume):
     assert faint > 1.0
 
 
+def test_population_factor_follows_the_rate_of_its_prior(volume):
+    """The factor for a Marshall-Palmer prior of another rate: the default is the prior of
+    brightness_q (10 mm/h, to the bit, and one cached node), any other rate the ratio of the
+    two fixed points computed directly on the model's parts; against a faint backdrop at
+    high noise it falls as the rain grows (more big drops, whose focus is measured best)."""
+    from raingauge.gauge.volume import (
+        BRIGHTNESS_PRIOR_RATE_MM_H, BRIGHTNESS_Q_NODES, _Q_GRID_COARSE, _brightness_percentile_q,
+    )
+
+    span = (0.15e-3, 2.8e-3)
+    noise = float(volume.noises_dn[-1])
+    c = 0.25 * volume.contrast_dn
+    base = volume.brightness_q_population_factor(noise, c, span)
+    assert volume.brightness_q_population_factor(noise, c, span, BRIGHTNESS_PRIOR_RATE_MM_H) == base
+    n_nodes = len(volume._q_nodes)
+    volume.brightness_q_population_factor(noise, c, span, BRIGHTNESS_PRIOR_RATE_MM_H)
+    assert len(volume._q_nodes) == n_nodes
+    # at a node of the grid: the direct ratio for 50 mm/h
+    node, i_n = -4, len(volume.noises_dn) - 1
+    j = node - BRIGHTNESS_Q_NODES[0]
+    parts = [(a, wt[i_n, j], q[i_n, j], sq[i_n, j]) for a, wt, q, sq in volume._q_node_parts]
+    direct = (_brightness_percentile_q(parts, volume.q_min, y=_Q_GRID_COARSE, prior_rate_mm_h=50.0)
+              / _brightness_percentile_q(parts, volume.q_min, y=_Q_GRID_COARSE, flat_between=span))
+    c_node = volume.contrast_dn * 2.0 ** (0.5 * node)
+    assert volume.brightness_q_population_factor(noise, c_node, span, 50.0) == pytest.approx(direct, rel=1e-9)
+    by_rate = [volume.brightness_q_population_factor(noise, c, span, r) for r in (10.0, 30.0, 100.0, 200.0)]
+    assert all(b > a for a, b in zip(by_rate[1:], by_rate[:-1]))
+    assert by_rate[0] == base
+
+
 def test_wind_dims_each_size_as_its_streak_slants(volume):
     """A drop drifting at u across its fall v(a) draws a streak slanted by u / v(a) and
     crosses each pixel faster: the simulator's exposure integral (render_streaks) gives the

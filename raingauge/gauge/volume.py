@@ -289,8 +289,12 @@ BRIGHTNESS_PERCENTILE = 75.0
 #: Narrowest streak whose brightness sample is used [px] (narrower ones are mostly noise).
 BRIGHTNESS_MIN_WIDTH_PX = 2.5
 
-#: Rain rate of the Marshall-Palmer size prior of :attr:`SampleVolume.brightness_q` [mm/h].
+#: Rain rate of the Marshall-Palmer size prior of :attr:`SampleVolume.brightness_q` [mm/h];
+#: also the least rate of the prior of :meth:`SampleVolume.brightness_q_population_factor`.
 BRIGHTNESS_PRIOR_RATE_MM_H = 10.0
+
+#: The greatest rate of the prior of :meth:`SampleVolume.brightness_q_population_factor` [mm/h].
+BRIGHTNESS_PRIOR_MAX_MM_H = 200.0
 
 
 #: Range of the contrasts of :meth:`SampleVolume.brightness_q_at`, in half octaves about
@@ -317,19 +321,22 @@ _Q_GRID_COARSE = np.linspace(0.0, 2.0, 201)
 
 
 def _brightness_percentile_q(parts, q_min: float, *, percentile: float = BRIGHTNESS_PERCENTILE,
-                             y: np.ndarray | None = None, flat_between=None) -> float:
+                             y: np.ndarray | None = None, flat_between=None,
+                             prior_rate_mm_h: float | None = None) -> float:
     """The fixed point m = P{ q' : q' >= q_min m } of the model's measured focus q' [-].
 
     ``parts``: (radius a [m], law-abiding weight over z [m^3/px^2], q(z), sigma_q(z)) per
-    radius of the grid; the sizes are weighted by a Marshall-Palmer prior (or, with
-    ``flat_between`` = (lo, hi) [m], uniformly in log a between those radii), each depth's
+    radius of the grid; the sizes are weighted by a Marshall-Palmer prior of
+    ``prior_rate_mm_h`` (default :data:`BRIGHTNESS_PRIOR_RATE_MM_H`), or, with
+    ``flat_between`` = (lo, hi) [m], uniformly in log a between those radii; each depth's
     q' is normal about q(z) with its standard error.
     """
     from raingauge.physics.drops import MarshallPalmer
 
     radii = np.array([p[0] for p in parts])
     if flat_between is None:
-        prior = MarshallPalmer(BRIGHTNESS_PRIOR_RATE_MM_H).number_density(2.0 * radii)
+        rate = BRIGHTNESS_PRIOR_RATE_MM_H if prior_rate_mm_h is None else float(prior_rate_mm_h)
+        prior = MarshallPalmer(rate).number_density(2.0 * radii)
     else:
         prior = ((radii >= flat_between[0]) & (radii <= flat_between[1])) / radii
     # the radius grid is log-spaced: da is proportional to a
@@ -736,12 +743,16 @@ class SampleVolume:
         factor = (1.0 - t) * at(k) + (t * at(k + 1) if t > 0.0 else 0.0)
         return float(base * factor)
 
-    def brightness_q_population_factor(self, noise_dn, contrast_dn, flat_between) -> float:
-        """q_ref of the Marshall-Palmer population of :attr:`brightness_q` over that of drops
+    def brightness_q_population_factor(self, noise_dn, contrast_dn, flat_between,
+                                       prior_rate_mm_h: float | None = None) -> float:
+        """q_ref of a Marshall-Palmer population of ``prior_rate_mm_h`` (default
+        :data:`BRIGHTNESS_PRIOR_RATE_MM_H`, that of :attr:`brightness_q`) over that of drops
         spread uniformly in log a between the radii ``flat_between`` = (lo, hi) [m], at a
         frame noise and a drop contrast E_r - E_b [gray levels] (both from the same grid of
         depths and q', linear between its nodes) [-].  The completeness probe measures the
-        second population's percentile in the frames; this factor carries it to the first."""
+        second population's percentile in the frames; this factor carries it to the first.
+        The heavier the rain, the larger the share of big drops, whose streaks are measured
+        best, and the smaller the factor."""
         if self.defocus_model != "uniform" or not self._q_node_parts:
             return 1.0
         c = self.contrast_dn if contrast_dn is None or not np.isfinite(contrast_dn) else float(contrast_dn)
@@ -756,22 +767,28 @@ class SampleVolume:
             for i, wn in ((i_n, 1.0 - tn), (i_n + 1, tn)):
                 if wc > 0.0 and wn > 0.0:
                     flat = self._brightness_q_node(node, i, span)
-                    out += wc * wn * self._brightness_q_node(node, i) / flat
+                    out += wc * wn * self._brightness_q_node(node, i, None, prior_rate_mm_h) / flat
         return float(out)
 
-    def _brightness_q_node(self, node: int, i_noise: int, flat_between=None) -> float:
+    def _brightness_q_node(self, node: int, i_noise: int, flat_between=None,
+                           prior_rate_mm_h: float | None = None) -> float:
         """The percentile of q' (:func:`_brightness_percentile_q`, on every
         :data:`P_TABLE_STRIDE`-th depth and a coarser grid of q') at the contrast
-        ``contrast_dn`` 2^(node / 2) and the noise ``noises_dn[i_noise]`` [-], computed
-        when first asked for."""
-        key = (node, i_noise, flat_between)
+        ``contrast_dn`` 2^(node / 2) and the noise ``noises_dn[i_noise]`` [-], for the
+        population of ``flat_between`` or of ``prior_rate_mm_h``, computed when first
+        asked for."""
+        if flat_between is None and prior_rate_mm_h is not None and \
+                float(prior_rate_mm_h) == BRIGHTNESS_PRIOR_RATE_MM_H:
+            prior_rate_mm_h = None
+        key = (node, i_noise, flat_between, prior_rate_mm_h)
         hit = self._q_nodes.get(key)
         if hit is not None:
             return hit
         j = node - BRIGHTNESS_Q_NODES[0]
         val = float(_brightness_percentile_q([(a, wt[i_noise, j], q[i_noise, j], sq[i_noise, j])
                                               for a, wt, q, sq in self._q_node_parts], self.q_min,
-                                             y=_Q_GRID_COARSE, flat_between=flat_between))
+                                             y=_Q_GRID_COARSE, flat_between=flat_between,
+                                             prior_rate_mm_h=prior_rate_mm_h))
         self._q_nodes[key] = val
         return val
 
