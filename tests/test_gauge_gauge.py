@@ -268,35 +268,41 @@ def test_low_contrast_interval_says_so():
 
 def test_condition_uncertainty_follows_the_validation():
     """Beyond the counting statistics the interval carries the scatter the validation
-    matrix found: 3 % on a dark, still scene; on a low-contrast or moving scene 11 % at
-    the noise of a good camera, 40 % from 2.5 gray levels, linear between."""
+    matrix found: 3 % on a dark, still scene; on a low-contrast or moving scene 7 % at
+    the noise of a good camera, 15 % from 2.5 gray levels, linear between."""
     from raingauge.gauge.gauge import condition_uncertainty
 
     assert condition_uncertainty([], 3.0) == pytest.approx(0.03)
     assert condition_uncertainty(["dropped_frames"], 3.0) == pytest.approx(0.03)
-    assert condition_uncertainty(["low_contrast"], 1.0) == pytest.approx(0.11)
-    assert condition_uncertainty(["scene_motion"], 3.0) == pytest.approx(0.40)
-    assert condition_uncertainty(["low_contrast", "scene_motion"], 2.0) == pytest.approx(0.255)
-    assert condition_uncertainty(["low_contrast"], float("nan")) == pytest.approx(0.40)
+    assert condition_uncertainty(["low_contrast"], 1.0) == pytest.approx(0.07)
+    assert condition_uncertainty(["scene_motion"], 3.0) == pytest.approx(0.15)
+    assert condition_uncertainty(["low_contrast", "scene_motion"], 2.0) == pytest.approx(0.11)
+    assert condition_uncertainty(["low_contrast"], float("nan")) == pytest.approx(0.15)
     # a cross wind adds the wind clips' scatter in quadrature, linear in the drift up to the
     # 3 m/s validated, held beyond; either direction; no wind (or none known) adds nothing
     assert condition_uncertainty([], 1.0, 3.0) == pytest.approx(math.hypot(0.03, 0.12))
     assert condition_uncertainty([], 1.0, -1.5) == pytest.approx(math.hypot(0.03, 0.06))
     assert condition_uncertainty([], 1.0, 8.0) == pytest.approx(math.hypot(0.03, 0.12))
-    assert condition_uncertainty(["low_contrast"], 1.0, 3.0) == pytest.approx(math.hypot(0.11, 0.12))
+    assert condition_uncertainty(["low_contrast"], 1.0, 3.0) == pytest.approx(math.hypot(0.07, 0.12))
     assert condition_uncertainty([], 1.0, 0.0) == pytest.approx(0.03)
     assert condition_uncertainty([], 1.0, float("nan")) == pytest.approx(0.03)
 
 
 def test_flagged_window_interval_carries_the_condition_uncertainty():
     """A textured scene in 3 gray levels of noise is flagged low_contrast; its interval
-    reaches at least 1.96 x 40 % of the reading on either side (the counting adds to it)."""
+    reaches at least 1.96 x 15 % of the reading on either side (the counting and the
+    probe add to it), and the record names that part."""
+    from raingauge.gauge.gauge import CONDITION_UNCERTAINTY
+
     rec, _truth = _noisy_window(2.0, "skimage:brick")
     rate = rec["rain_rate_mm_h"]
     lo, hi = rec["rain_rate_ci95_mm_h"]
+    u = CONDITION_UNCERTAINTY[1]
+    assert u == 0.15
     assert "low_contrast" in rec["quality"] and rate > 0
-    assert hi - rate >= 1.96 * 0.40 * rate * 0.999
-    assert rate - lo >= min(1.96 * 0.40 * rate, rate) * 0.999
+    assert rec["rain_rate_conditions_rsd"] == pytest.approx(u)
+    assert hi - rate >= 1.96 * u * rate * 0.999
+    assert rate - lo >= min(1.96 * u * rate, rate) * 0.999
 
 
 def _run_cam(cam, frames, **kw):
