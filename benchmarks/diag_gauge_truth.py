@@ -27,6 +27,7 @@ them between clips and with the probe's, not with 1.
 
     python benchmarks/diag_gauge_truth.py --rate 10 --background bright_sky --noise 3
     python benchmarks/diag_gauge_truth.py --rate 30 --wind 3 --seconds 60
+    python benchmarks/diag_gauge_truth.py --rate 10 --dsd gamma3
     python benchmarks/diag_gauge_truth.py --rate 100 --background dark_uniform --noise 1 --given-brightness
 
 The first line gives the drop brightness E_r the gauge estimated beside the simulator's;
@@ -93,7 +94,7 @@ def match(truth, x, y):
     return j if u[j] <= 1.0 else -1
 
 
-def run(rate, background, noise, wind, seconds, seed, size, *, given_brightness=False):
+def run(rate, background, noise, wind, seconds, seed, size, *, given_brightness=False, dsd="marshall_palmer"):
     from raingauge.gauge import RainGauge
     from raingauge.gauge.completeness import CLASS_EDGES_M
     from raingauge.gauge.gauge import KAPPA_FLOOR_REL
@@ -105,8 +106,10 @@ def run(rate, background, noise, wind, seconds, seed, size, *, given_brightness=
     w, h = size
     prof = default_profile().replace(width_px=w, height_px=h, noise_sigma_dn=float(noise))
     spec, motion, e_r = BACKGROUNDS[background]
+    # the drop size distribution, as the accuracy benchmark draws it
+    dsd_kw = {"dsd": "gamma", "dsd_params": {"mu": 3.0}} if dsd == "gamma3" else {}
     sim = simulate(prof, seconds=seconds, seed=seed, background=spec, motion=motion, wind_m_s=wind,
-                   drop_brightness_dn=e_r, truth_drops=True, rain_rate_mm_h=rate)
+                   drop_brightness_dn=e_r, truth_drops=True, rain_rate_mm_h=rate, **dsd_kw)
     # given the simulator's drop brightness, the gauge does not estimate it from its streaks
     g = RainGauge(prof, window_s=seconds, step_s=seconds, keep_drops=True,
                   drop_brightness_dn=e_r if given_brightness else None)
@@ -193,7 +196,9 @@ def run(rate, background, noise, wind, seconds, seed, size, *, given_brightness=
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--rate", type=float, default=10.0, help="rain rate [mm/h] (Marshall-Palmer)")
+    ap.add_argument("--rate", type=float, default=10.0, help="rain rate [mm/h]")
+    ap.add_argument("--dsd", choices=("marshall_palmer", "gamma3"), default="marshall_palmer",
+                    help="drop size distribution: Marshall-Palmer, or gamma with mu = 3")
     ap.add_argument("--background", choices=sorted(BACKGROUNDS), default="bright_sky")
     ap.add_argument("--noise", type=float, default=3.0, help="sensor noise [gray levels]")
     ap.add_argument("--wind", type=float, default=0.0, help="wind [m/s]")
@@ -208,7 +213,7 @@ def main(argv=None) -> int:
     except ValueError:
         ap.error(f"--size must be WxH, e.g. 1280x720, got {args.size!r}")
     run(args.rate, args.background, args.noise, args.wind, args.seconds, args.seed, (w, h),
-        given_brightness=args.given_brightness)
+        given_brightness=args.given_brightness, dsd=args.dsd)
     return 0
 
 

@@ -158,6 +158,48 @@ def test_probe_meets_the_rain_of_all_three_frames(volume):
     assert found == pytest.approx(free, abs=0.08 * total)
 
 
+def test_blobs_are_the_drops_components_and_the_frames_streaks_merged_in_them(volume):
+    """Each injected drop lies in the canvas component its axis crosses; the frame's streaks
+    under that component are its partners: the rain column a drop touches, none for a drop
+    clear of the rain.  The compiled loop gives the reference's labels."""
+    from raingauge.gauge import _kernels
+    from raingauge.gauge.streaks import detect_streaks, spike_image
+
+    rng = np.random.default_rng(2)
+    M, N = CAM.shape
+    prev, cur, nxt = (40.0 + rng.standard_normal((3, M, N))).astype(np.float32)
+    rain = np.zeros(N, bool)
+    for x in range(10, N - 3, 24):
+        rain[x:x + 3] = True
+    cur[:, rain] += 150.0
+    frame_labels, _ = detect_streaks(spike_image(prev, cur, nxt), c=3.0)
+    probe = _probe(volume, per_frame=16)
+    touching = clear = 0
+    for _ in range(6):
+        plan = [p for p in probe.plan(CAM.shape, slope=0.0) if p["radius_m"] > 0.4e-3]
+        lin, _raw, centres = probe.canvas((prev, cur, nxt), plan, 220.0, noise_dn=1.0)
+        labels, stats = detect_streaks(spike_image(*lin), c=3.0)
+        blob, partners = CompletenessProbe.blobs(labels, stats, frame_labels, plan, engine="arrays")
+        if _kernels.AVAILABLE:
+            blob2, partners2 = CompletenessProbe.blobs(labels, stats, frame_labels, plan, engine="compiled")
+            np.testing.assert_array_equal(blob2, blob)
+            assert partners2 == partners
+        for j, (p, (cx, cy)) in enumerate(zip(plan, centres)):
+            assert blob[j] == labels[int(round(cy)), int(round(cx))] > 0
+            # the rain columns under the drop's capsule, and those near it
+            x, r = p["centre"][0], p["radius_px"]
+            cols = np.flatnonzero(rain & (np.abs(np.arange(N) - x) <= r - 0.5))
+            near = np.flatnonzero(rain & (np.abs(np.arange(N) - x) <= r + 3.0))
+            assert 0 not in partners[j] and list(partners[j]) == sorted(set(partners[j]))
+            if cols.size:
+                touching += 1
+                assert {int(frame_labels[M // 2, c]) for c in cols} <= set(partners[j])
+            elif near.size == 0:
+                clear += 1
+                assert partners[j] == ()
+    assert touching >= 10 and clear >= 10
+
+
 def test_a_drop_merged_with_a_streak_the_crop_cuts_is_lost(volume):
     """In the canvas a long streak of the frame is cut to its crop, and a drop merged with
     it looks smaller than the blob the frame holds: every component reaching its crop's

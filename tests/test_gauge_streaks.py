@@ -582,9 +582,10 @@ def test_streak_table_reads_8bit_frames_as_their_float_image(engine):
                     reason="numba not installed")
 def test_compiled_labelling_equals_opencv():
     """The compiled labelling from a mask's runs (raingauge.gauge._kernels.label_components)
-    gives OpenCV's 8-connected labels, their numbering, label type and stats, on random masks
-    of any shape and density (rows of a ragged last 8-pixel word included), an empty one and
-    a dense one past 65000 pixels (32-bit labels)."""
+    gives OpenCV's 8-connected labels, their numbering and stats, on random masks of any
+    shape and density (rows of a ragged last 8-pixel word included), an empty one and a dense
+    one past 65000 pixels; 16-bit labels up to 65536 labels (a dense mask of few components
+    too), 32-bit ones past them."""
     import cv2
 
     from raingauge.gauge import _kernels
@@ -605,10 +606,18 @@ def test_compiled_labelling_equals_opencv():
         n, labels, stats = opencv(mask)
         n2, labels2, stats2 = _kernels.label_components(mask)
         assert n2 == n
-        assert labels2.dtype == labels.dtype
+        assert labels2.dtype == np.uint16
         np.testing.assert_array_equal(labels2, labels)
         np.testing.assert_array_equal(stats2, stats)
-    assert masks[1].sum() // 255 >= 65000 and _kernels.label_components(masks[1])[1].dtype == np.int32
+    assert np.count_nonzero(masks[1]) >= 65000
+    # isolated pixels two apart: 66560 components, past what 16 bits number
+    many = np.zeros((512, 520), np.uint8)
+    many[::2, ::2] = 255
+    n, labels, stats = opencv(many)
+    n2, labels2, stats2 = _kernels.label_components(many)
+    assert n2 == n == 66561 and labels2.dtype == np.int32
+    np.testing.assert_array_equal(labels2, labels)
+    np.testing.assert_array_equal(stats2, stats)
 
 
 def test_detection_from_8bit_frames_equals_that_of_their_spike_image():

@@ -267,6 +267,24 @@ def test_histogram_weights_average_the_contrast_weights_of_the_pixels(volume):
                                                                    rel=1e-12, abs=1e-15)
 
 
+def test_contrast_weights_of_many_sets_are_each_sets_own(volume):
+    """The weights of several sets of contrasts taken in one pass are, row by row, those of
+    each set alone, to the bit: sets below, inside and above the grid, with NaNs, empty and
+    all-NaN ones."""
+    rng = np.random.default_rng(9)
+    lo, hi = volume.contrasts_dn[0], volume.contrasts_dn[-1]
+    sets = [rng.uniform(0.5 * lo, 1.5 * hi, int(rng.integers(1, 300))).astype(np.float32) for _ in range(12)]
+    sets[3][::7] = np.nan
+    sets += [np.zeros(0, np.float32), np.full(5, np.nan, np.float32), np.full(4, 0.1 * lo),
+             np.full(6, 10.0 * hi), rng.uniform(lo, hi, (7, 9))]
+    each = volume.contrast_weights_each(sets)
+    assert each.shape == (len(sets), volume.contrasts_dn.size)
+    for row, c in zip(each, sets):
+        np.testing.assert_array_equal(row, volume.contrast_weights(c))
+    assert each[-3].sum() == 0.0 and each[-2].sum() == pytest.approx(1.0)
+    assert volume.contrast_weights_each([]).shape == (0, volume.contrasts_dn.size)
+
+
 def test_hidden_share_from_the_background(volume):
     """Against a dark background every measurable size is visible (nothing hidden); against a
     background as bright as the drops nothing is, and the share of the rate hidden is all."""

@@ -30,7 +30,7 @@ except ImportError:  # pragma: no cover
     numba = None
     AVAILABLE = False
 
-__all__ = ["AVAILABLE", "change_histogram", "label_components", "own_pixels", "profile_pass", "spike_masks",
+__all__ = ["AVAILABLE", "blob_partners", "change_histogram", "label_components", "own_pixels", "profile_pass", "spike_masks",
            "union_roots", "warm_up"]
 
 
@@ -681,9 +681,10 @@ def _paint_runs(labels, row_ptr, xs, xe, run_label):
 
 def label_components(mask):
     """``cv2.connectedComponentsWithStats(mask, connectivity=8, ltype=...)`` for a sparse
-    mask, from its runs: (n, labels, stats), the labels uint16 while the mask has fewer than
-    65000 pixels (else int32), numbered as OpenCV numbers them; the stats' row 0 (the
-    background) is 0 and only their first five columns are given.
+    mask, from its runs: (n, labels, stats), the labels uint16 while there are at most 65536
+    labels (else int32; half the memory to clear and write, and a frame of heavy rain has a
+    few thousand), numbered as OpenCV numbers them; the stats' row 0 (the background) is 0
+    and only their first five columns are given.
 
     Parameters
     ----------
@@ -696,8 +697,7 @@ def label_components(mask):
     words = mask.view(np.uint64) if use_words else np.zeros((1, 1), np.uint64)
     row_ptr, xs, xe = _runs(mask, words, use_words)
     run_label, stats = _run_components(row_ptr, xs, xe)
-    n_px = int(stats[:, 4].sum())
-    labels = np.zeros((M, N), np.uint16 if n_px < 65000 else np.int32)
+    labels = np.zeros((M, N), np.uint16 if stats.shape[0] <= 65536 else np.int32)
     _paint_runs(labels, row_ptr, xs, xe, run_label)
     return stats.shape[0], labels, stats
 
@@ -805,6 +805,61 @@ def _union_roots(n_nodes, first, second):
 _WARMED: set = set()
 
 
+@_jit
+def _blob_partners(labels, frame_labels, blob, st, dy, dx, vals, ptr):
+    M, N = frame_labels.shape
+    n_out = 0
+    for i in range(blob.size):
+        ptr[i] = n_out
+        b = blob[i]
+        start = n_out
+        for y in range(st[i, 1], st[i, 1] + st[i, 3]):
+            fy = y + dy[i]
+            if fy < 0 or fy >= M:
+                continue
+            for x in range(st[i, 0], st[i, 0] + st[i, 2]):
+                if labels[y, x] != b:
+                    continue
+                fx = x + dx[i]
+                if fx < 0 or fx >= N:
+                    continue
+                v = np.int64(frame_labels[fy, fx])
+                if v <= 0:
+                    continue
+                # insert into the sorted, distinct labels of this blob
+                j = n_out
+                while j > start and vals[j - 1] > v:
+                    j -= 1
+                if j > start and vals[j - 1] == v:
+                    continue
+                if n_out >= vals.size:
+                    return -1
+                for q in range(n_out, j, -1):
+                    vals[q] = vals[q - 1]
+                vals[j] = v
+                n_out += 1
+    ptr[blob.size] = n_out
+    return n_out
+
+
+def blob_partners(labels, frame_labels, blob, boxes, dy, dx):
+    """The frame's labels under each blob of a canvas (:meth:`raingauge.gauge.completeness.
+    CompletenessProbe.blobs`): for blob i, the pixels of ``labels == blob[i]`` in its box
+    ``boxes[i]`` (x, y, width, height), moved by (``dx[i]``, ``dy[i]``) into the frame, and
+    the positive ``frame_labels`` there, distinct and ascending.  Returns (values, ptr): blob
+    i's labels are values[ptr[i]:ptr[i + 1]]."""
+    blob, dy, dx = _i64(blob), _i64(dy), _i64(dx)
+    boxes = np.ascontiguousarray(boxes, dtype=np.int64).reshape(-1, 4)
+    ptr = np.zeros(blob.size + 1, np.int64)
+    size = 64
+    while True:
+        vals = np.empty(size, np.int64)
+        n = _blob_partners(labels, frame_labels, blob, boxes, dy, dx, vals, ptr)
+        if n >= 0:
+            return vals[:n], ptr
+        size *= 8
+
+
 def warm_up(frames_8bit: bool = False) -> None:
     """Compile the loops (or load them from numba's cache) for the gauge's inputs now rather
     than on the first frames of a live camera; once per process and kind of frames.
@@ -837,6 +892,10 @@ def warm_up(frames_8bit: bool = False) -> None:
         spike_masks(*frames, 5, 15.0, 7.5)
         spike_masks(*frames, 5, 15.0)
     union_roots(4, np.array([0, 2]), np.array([1, 1]))
+    for lt in (np.uint16, np.int32):
+        for ft in (np.uint16, np.int32):
+            blob_partners(np.ones((4, 4), lt), np.ones((4, 4), ft), np.array([1]), np.array([[0, 0, 4, 4]]),
+                          np.array([0]), np.array([0]))
     # the labelling, into 16- and 32-bit labels, of masks with and without a ragged last word
     for width in (32, 30):
         mask = np.zeros((48, width), np.uint8)

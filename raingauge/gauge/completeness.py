@@ -91,6 +91,7 @@ from collections import deque
 
 import numpy as np
 
+from raingauge.gauge import _kernels
 from raingauge.gauge._numeric import clip as _clip
 
 __all__ = ["CompletenessProbe", "CLASS_EDGES_M"]
@@ -284,18 +285,23 @@ class CompletenessProbe:
         sx, sy, sw, sh = sx[real], sy[real], sw[real], sh[real]
         ex, ey = sx + sw, sy + sh
         m = CROP_MARGIN_PX
-        for p in plan:
-            x0, y0, cw, ch = p["box"]
-            meet = (sx < x0 + cw) & (ex > x0) & (sy < y0 + ch) & (ey > y0)
-            meet &= (sw <= reach * cw) & (sh <= reach * ch)
-            if not meet.any():
-                continue
+        # which components meet which crop (crops x components), and their extremes
+        x0, y0, cw, ch = (np.array([p["box"][i] for p in plan], np.int64)[:, None] for i in range(4))
+        meet = ((sx < x0 + cw) & (ex > x0) & (sy < y0 + ch) & (ey > y0)
+                & (sw <= reach * cw) & (sh <= reach * ch))
+        big = np.iinfo(np.int64).max
+        lo_x = np.where(meet, sx, big).min(axis=1)
+        lo_y = np.where(meet, sy, big).min(axis=1)
+        hi_x = np.where(meet, ex, -big).max(axis=1)
+        hi_y = np.where(meet, ey, -big).max(axis=1)
+        for j in np.flatnonzero(meet.any(axis=1)).tolist():
+            bx, by, bw, bh = plan[j]["box"]
             # (the frame's outermost row and column stay out, as in :meth:`plan`)
-            nx0 = max(min(x0, int(sx[meet].min()) - m), 1)
-            ny0 = max(min(y0, int(sy[meet].min()) - m), 1)
-            nx1 = min(max(x0 + cw, int(ex[meet].max()) + m), N - 1)
-            ny1 = min(max(y0 + ch, int(ey[meet].max()) + m), M - 1)
-            p["box"] = (nx0, ny0, nx1 - nx0, ny1 - ny0)
+            nx0 = max(min(bx, int(lo_x[j]) - m), 1)
+            ny0 = max(min(by, int(lo_y[j]) - m), 1)
+            nx1 = min(max(bx + bw, int(hi_x[j]) + m), N - 1)
+            ny1 = min(max(by + bh, int(hi_y[j]) + m), M - 1)
+            plan[j]["box"] = (nx0, ny0, nx1 - nx0, ny1 - ny0)
 
     def canvas(self, frames, plan: list[dict], drop_brightness_dn: float, *, raws=None, delinearize=None,
                noise_dn: float = 0.0, linear: bool = True):
@@ -418,6 +424,86 @@ class CompletenessProbe:
         out[1:] = ((sx <= bx) | (sx + sw >= bx + bw) | (sy <= by) | (sy + sh >= by + bh)
                    | ~inside.any(axis=1))
         return out
+
+    @staticmethod
+    def blobs(labels, stats, frame_labels, plan: list[dict], *, engine: str | None = None):
+        """The component of a canvas each injected drop lies in, and the frame's streaks
+        merged in it.
+
+        A drop's blob is the label most of the points along its axis (one per pixel of its
+        motion, at least 3; the smallest label on a tie) fall on, 0 when none does; its
+        partners are the frame's labels (``frame_labels``) under the blob's pixels, each
+        taken back from the canvas to the frame through the drop's crop (none when the blob
+        was set aside, area 0).
+
+        Parameters
+        ----------
+        labels, stats : the canvas's labels and stats (:func:`detect_streaks`)
+        frame_labels : (M, N) int array
+            The frame's own labels.
+        plan : from :meth:`plan`, placed in the canvas (:meth:`canvas`)
+        engine : {"compiled", "arrays"}, optional
+            The partners from one compiled loop (numba; the default when it is installed) or
+            one array pass per drop (the reference).  The same labels either way.
+
+        Returns
+        -------
+        (blob, partners): (n,) int64 labels, and per drop a tuple of the frame's labels,
+        ascending.
+        """
+        n = len(plan)
+        blob = np.zeros(n, np.int64)
+        partners = [()] * n
+        if n == 0:
+            return blob, partners
+        cbox = np.array([p["canvas_box"] for p in plan], np.int64).reshape(n, 4)
+        box = np.array([p["box"] for p in plan], np.int64).reshape(n, 4)
+        ends = np.array([(*p["p0"], *p["p1"]) for p in plan], np.float64).reshape(n, 4)
+        # the points along each axis: np.linspace(0, 1, m) of each drop, end to end
+        m = np.array([max(int(p["motion_px"]) + 1, 3) for p in plan], np.int64)
+        g = np.repeat(np.arange(n), m)
+        k = np.arange(g.size) - np.repeat(np.cumsum(m) - m, m)
+        u = k * np.repeat(1.0 / (m - 1), m)
+        u[np.cumsum(m) - 1] = 1.0
+        ax, ay, bx, by = (ends[g, i] for i in range(4))
+        col = _clip(np.rint(ax + u * (bx - ax)).astype(int) - box[g, 0], 0, cbox[g, 2] - 1)
+        row = _clip(np.rint(ay + u * (by - ay)).astype(int) - box[g, 1], 0, cbox[g, 3] - 1)
+        on = labels[cbox[g, 1] + row, cbox[g, 0] + col].astype(np.int64)
+        hit = on > 0
+        g, on = g[hit], on[hit]
+        if g.size:
+            # each drop's most frequent label (the smallest of the most frequent)
+            order = np.lexsort((on, g))
+            g, on = g[order], on[order]
+            first = np.flatnonzero(np.concatenate(([True], (g[1:] != g[:-1]) | (on[1:] != on[:-1]))))
+            count = np.diff(np.append(first, g.size))
+            gg, vv = g[first], on[first]
+            best = np.lexsort((vv, -count, gg))
+            top = best[np.concatenate(([True], gg[best][1:] != gg[best][:-1]))]
+            blob[gg[top]] = vv[top]
+        area = np.asarray(stats)[blob, 4]
+        js = np.flatnonzero((blob > 0) & (area > 0))
+        if js.size == 0:
+            return blob, partners
+        st = np.asarray(stats)[blob[js], :4].astype(np.int64)
+        # canvas -> frame offsets of each drop's crop
+        dy = box[js, 1] - cbox[js, 1]
+        dx = box[js, 0] - cbox[js, 0]
+        if _kernels.AVAILABLE and engine != "arrays":
+            vals, ptr = _kernels.blob_partners(labels, frame_labels, blob[js], st, dy, dx)
+            for i, j in enumerate(js.tolist()):
+                partners[j] = tuple(vals[ptr[i]:ptr[i + 1]].tolist())
+            return blob, partners
+        M, N = frame_labels.shape
+        for i, j in enumerate(js.tolist()):
+            bx0, by0, bw, bh = st[i]
+            yy, xx = np.nonzero(labels[by0:by0 + bh, bx0:bx0 + bw] == blob[j])
+            fy = yy + by0 + dy[i]
+            fx = xx + bx0 + dx[i]
+            inside = (fy >= 0) & (fy < M) & (fx >= 0) & (fx < N)
+            under = frame_labels[fy[inside], fx[inside]]
+            partners[j] = tuple(int(v) for v in np.unique(under[under > 0]))
+        return blob, partners
 
     def due(self, frame_index: int) -> bool:
         """Whether the frame of this index is probed."""

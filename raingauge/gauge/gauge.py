@@ -1068,19 +1068,22 @@ class RainGauge:
         p_pass = np.zeros(len(plan))
         kaps = np.atleast_1d(np.asarray(vol.kappa(np.array([p["radius_m"] for p in plan]), weights=weights,
                                                   noise_dn=noise_dn, wind_m_s=wind), dtype=float))
+        behinds = []
         for j, p in enumerate(plan):
             x0, y0, cw, ch = p["box"]
             r = int(math.ceil(p["radius_px"]))
             xa = int(round(min(p["p0"][0], p["p1"][0]))) - r
             xb = int(round(max(p["p0"][0], p["p1"][0]))) + r + 1
             behind = frames[0][int(p["p0"][1]):int(p["p1"][1]) + 1, max(xa, 0):xb].astype(np.float32, copy=False)
-            kap = float(kaps[j])
-            if behind.size and kap >= floor:
-                # p over the pixels behind the drop, averaged as kappa averages it over the
-                # frame's pixels: the ratio then corrects that kappa and no other model of it
-                local = vol.contrast_weights(min(e_r, self._white_dn) - behind)
-                p_pass[j] = vol.pass_probability_over(p["radius_m"], p["depth_m"], local, noise_dn, wind_m_s=wind)
-                expected[j] = p_pass[j] * (2.0 * p["radius_m"]) ** 3 * p["velocity_m_s"] / kap
+            if behind.size and float(kaps[j]) >= floor:
+                behinds.append((j, min(e_r, self._white_dn) - behind))
+        # p over the pixels behind each drop, averaged as kappa averages it over the frame's
+        # pixels: the ratio then corrects that kappa and no other model of it
+        local = vol.contrast_weights_each([b for _j, b in behinds])
+        for (j, _b), w_j in zip(behinds, local):
+            p = plan[j]
+            p_pass[j] = vol.pass_probability_over(p["radius_m"], p["depth_m"], w_j, noise_dn, wind_m_s=wind)
+            expected[j] = p_pass[j] * (2.0 * p["radius_m"]) ** 3 * p["velocity_m_s"] / float(kaps[j])
         # what the gauge makes of each injected drop: its share of the rate,
         # (2 a)^3 v / kappa(a) with a, v and kappa as measured (0 when it is not counted)
         estimate = np.zeros(len(plan))
@@ -1113,31 +1116,7 @@ class RainGauge:
 
         # the blob each drop lies in (the label most of its axis crosses) and the frame's
         # streaks merged in it (the frame's labels under the blob's pixels)
-        blob = np.zeros(len(plan), np.int64)
-        partners = [()] * len(plan)
-        for j, p in enumerate(plan):
-            cx0, cy0, cw, ch = p["canvas_box"]
-            x0, y0 = p["box"][0], p["box"][1]
-            (ax, ay), (bx, by) = p["p0"], p["p1"]
-            u = np.linspace(0.0, 1.0, max(int(p["motion_px"]) + 1, 3))
-            col = _clip(np.rint(ax + u * (bx - ax)).astype(int) - x0, 0, cw - 1)
-            row = _clip(np.rint(ay + u * (by - ay)).astype(int) - y0, 0, ch - 1)
-            on = lab_c[cy0 + row, cx0 + col]
-            on = on[on > 0]
-            if on.size == 0:
-                continue
-            vals, cnt = np.unique(on, return_counts=True)
-            b = int(vals[np.argmax(cnt)])
-            blob[j] = b
-            if st_c[b, 4] <= 0:
-                continue
-            bx0, by0, bw, bh = (int(v) for v in st_c[b, :4])
-            yy, xx = np.nonzero(lab_c[by0:by0 + bh, bx0:bx0 + bw] == b)
-            fy = yy + by0 - cy0 + y0
-            fx = xx + bx0 - cx0 + x0
-            inside = (fy >= 0) & (fy < frame_labels.shape[0]) & (fx >= 0) & (fx < frame_labels.shape[1])
-            under = frame_labels[fy[inside], fx[inside]]
-            partners[j] = tuple(int(v) for v in np.unique(under[under > 0]))
+        blob, partners = probe.blobs(lab_c, st_c, frame_labels, plan)
         merged = np.array([bool(pr) for pr in partners])
         frame_share = {}
         if merged.any():
@@ -1459,30 +1438,32 @@ class RainGauge:
         if prepared:
             self._prune_tracks(prepared[0]["t"])
         qs = self._photometric_qs(prepared, e_r)
-        for c, q in zip(prepared, qs):
+        radii = [self._drop_radius(c, e_r, c.get("vol", self.volume), q=q) for c, q in zip(prepared, qs)]
+        sized = [k for k, a in enumerate(radii) if a is not None]
+        n_photo = len(prepared) - len(sized)
+        rejected += n_photo
+        self.rejections["defocus_photometric"] += n_photo
+        # the sizes' kappa, whole-streak areas, probe corrections and depths, as arrays over
+        # the frame's candidates (they share its volume, backgrounds and noise)
+        kaps, areas, floors, c_probes, depths = self._decide_arrays([prepared[k] for k in sized],
+                                                                    np.array([radii[k] for k in sized]), e_r, wind)
+        for n, k in enumerate(sized):
+            c, a = prepared[k], radii[k]
             t, w_app, mot, dx, xc, yc = c["t"], c["w_app"], c["mot"], c["dx"], c["xc"], c["yc"]
-            vol = c.get("vol", self.volume)
-            a = self._drop_radius(c, e_r, vol, q=q)
-            if a is None:
-                rejected += 1
-                self.rejections["defocus_photometric"] += 1
-                continue
-            frame_weights = self._frame_weights(c, e_r)
-            kap = float(vol.kappa(a, weights=frame_weights, noise_dn=c.get("noise_dn"), wind_m_s=wind))
-            area = float(whole_streak_area_px2((dx, mot), w_app, prof.shape)) / self._frame_interval
-            if not kap >= self._kappa_floor(frame_weights, vol, wind) or area <= 0:
+            kap, area = float(kaps[n]), float(areas[n])
+            if not kap >= floors[n] or area <= 0:
                 rejected += 1
                 self.rejections["no_volume"] += 1
                 continue
             c_probe = 1.0
             if self.probe is not None:
                 # the share of the modelled volume the probe's drops of this size found
-                c_probe = float(self.probe.correction(a))
+                c_probe = float(c_probes[n])
                 kap *= c_probe
             # a drop whose streak touched another one is lost to the merge: count the
             # isolated ones up by the chance of isolation at this streak's size and frame
             area *= 1.0 - c["p_overlap"]
-            z = float(vol.depth_m(a))
+            z = float(depths[n])
             v = mot * z / (f * T)
             weight = 1.0 / (kap * area)
             # the same drop seen in an earlier frame continues its track (one drop for the
@@ -1971,6 +1952,38 @@ class RainGauge:
             return None
         return {"diameter_m": dc, "velocity_m_s": v, "weight_s_m3": dens * duration, "rate_mm_h": rate,
                 "lambda_per_mm": 1e-3 * lam, "d_cut_m": d_cut}
+
+    def _decide_arrays(self, cands: list, radii: np.ndarray, e_r: float, wind: float):
+        """For candidates of sizes ``radii`` [m] (:meth:`_decide`): their kappa at their frame's
+        backgrounds and noise, whole-streak areas per frame period, the kappa floor, the
+        probe's corrections (1 without the probe) and the mean depths; one array each, taken
+        together where the candidates share their frame's volume, backgrounds and noise (the
+        same numbers as one at a time)."""
+        prof = self.profile
+        n = len(cands)
+        if n == 0:
+            return (np.zeros(0),) * 5
+        vols = [c.get("vol", self.volume) for c in cands]
+        weights = [self._frame_weights(c, e_r) for c in cands]
+        noises = [c.get("noise_dn") for c in cands]
+        shared = all(v is vols[0] for v in vols) and all(w is weights[0] for w in weights) and \
+            all(x == noises[0] or (x is None and noises[0] is None) for x in noises)
+        if shared:
+            vol = vols[0]
+            kaps = np.asarray(vol.kappa(radii, weights=weights[0], noise_dn=noises[0], wind_m_s=wind), dtype=float)
+            floors = np.full(n, self._kappa_floor(weights[0], vol, wind))
+            depths = np.asarray(vol.depth_m(radii), dtype=float)
+        else:
+            kaps = np.array([float(v.kappa(a, weights=w, noise_dn=x, wind_m_s=wind))
+                             for v, w, x, a in zip(vols, weights, noises, radii.tolist())])
+            floors = np.array([self._kappa_floor(w, v, wind) for v, w in zip(vols, weights)])
+            depths = np.array([float(v.depth_m(a)) for v, a in zip(vols, radii.tolist())])
+        motion = np.array([(c["dx"], c["mot"]) for c in cands], dtype=float)
+        areas = np.asarray(whole_streak_area_px2(motion, np.array([c["w_app"] for c in cands], dtype=float),
+                                                 prof.shape), dtype=float) / self._frame_interval
+        c_probes = (np.ones(n) if self.probe is None
+                    else np.asarray(self.probe.correction(radii), dtype=float))
+        return kaps, areas, floors, c_probes, depths
 
     def _frame_weights(self, c: dict, e_r: float):
         """Contrast weights of the frame of candidate ``c`` (:meth:`SampleVolume.histogram_weights`),

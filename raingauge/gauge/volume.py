@@ -529,6 +529,8 @@ class SampleVolume:
         table, zbar, fac, spans, p_z = [], [], [], [], []
         q_parts = []
         self._q_nodes = {}
+        self._q_at_memo = None
+        self._bracket_memo = None
         self._q_node_parts = []
         node_c = self.contrast_dn * 2.0 ** (0.5 * np.arange(BRIGHTNESS_Q_NODES[0], BRIGHTNESS_Q_NODES[1] + 1))
         for a in self.radii_m:
@@ -628,6 +630,30 @@ class SampleVolume:
         out = np.bincount(i, 1.0 - t, minlength=grid.size) + np.bincount(i + 1, t, minlength=grid.size)
         return out / c.size
 
+    def contrast_weights_each(self, contrasts) -> np.ndarray:
+        """:meth:`contrast_weights` of each of several sets of contrasts, in one pass: (n,
+        n_contrasts), row i that of ``contrasts[i]`` (the same sums, in the same order)."""
+        sets = [np.asarray(c, dtype=float).ravel() for c in contrasts]
+        n, G = len(sets), self.contrasts_dn.size
+        if n == 0:
+            return np.zeros((0, G))
+        c = np.concatenate(sets) if n > 1 else sets[0]
+        g = np.repeat(np.arange(n), [x.size for x in sets])
+        fin = np.isfinite(c)
+        size = np.bincount(g[fin], minlength=n)
+        grid = np.log(self.contrasts_dn)
+        seen = fin & (c >= self.contrasts_dn[0])
+        g = g[seen]
+        lc = np.log(_clip(c[seen], self.contrasts_dn[0], self.contrasts_dn[-1]))
+        i = _clip(np.searchsorted(grid, lc, side="right") - 1, 0, grid.size - 2)
+        t = _clip((lc - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0)
+        out = (np.bincount(g * G + i, 1.0 - t, minlength=n * G)
+               + np.bincount(g * G + i + 1, t, minlength=n * G)).reshape(n, G)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = out / size[:, None]
+        out[size == 0] = 0.0
+        return out
+
     def histogram_weights(self, histogram, drop_brightness_dn: float) -> np.ndarray:
         """:meth:`contrast_weights` of a frame from its histogram of background levels.
 
@@ -720,8 +746,14 @@ class SampleVolume:
         the percentile there differs from that at ``contrast_dn``, interpolated in log C.
         """
         noise = None if noise_dn is None or not np.isfinite(noise_dn) else float(noise_dn)
-        base = self.brightness_q if noise is None else float(np.interp(noise, self.noises_dn,
-                                                                      self.brightness_q_by_noise))
+        # the base and the noise grid's two nodes about the frame's noise (linear weights):
+        # kept for the last noise (the drop brightness asks at one noise for many contrasts)
+        memo = self._q_at_memo
+        if memo is None or memo[0] != noise:
+            base = self.brightness_q if noise is None else float(np.interp(noise, self.noises_dn,
+                                                                          self.brightness_q_by_noise))
+            memo = self._q_at_memo = (noise, base, self._noise_bracket(noise), {})
+        base, (i_n, tn), factors = memo[1], memo[2], memo[3]
         if contrast_dn is None or not np.isfinite(contrast_dn) or contrast_dn == self.contrast_dn:
             return base
         if self.defocus_model != "uniform":
@@ -730,14 +762,15 @@ class SampleVolume:
         x = min(max(x, float(BRIGHTNESS_Q_NODES[0])), float(BRIGHTNESS_Q_NODES[1]))
         k = min(math.floor(x), BRIGHTNESS_Q_NODES[1] - 1)
         t = x - k
-        # the noise grid's two nodes about the frame's noise, linear weights
-        i_n, tn = self._noise_bracket(noise)
 
         def at(node):
-            out = 0.0
-            for i, w in ((i_n, 1.0 - tn), (i_n + 1, tn)):
-                if w > 0.0:
-                    out += w * self._brightness_q_node(node, i) / self._brightness_q_node(0, i)
+            out = factors.get(node)
+            if out is None:
+                out = 0.0
+                for i, w in ((i_n, 1.0 - tn), (i_n + 1, tn)):
+                    if w > 0.0:
+                        out += w * self._brightness_q_node(node, i) / self._brightness_q_node(0, i)
+                factors[node] = out
             return out
 
         factor = (1.0 - t) * at(k) + (t * at(k + 1) if t > 0.0 else 0.0)
@@ -944,9 +977,15 @@ class SampleVolume:
         (node 0, weight 0 for None: the profile's noise)."""
         if noise_dn is None or not np.isfinite(noise_dn):
             return 0, 0.0
+        # (kept for the last noise: a frame asks at one noise many times)
+        last = self._bracket_memo
+        if last is not None and last[0] == noise_dn:
+            return last[1]
         x = float(_clip(noise_dn, self.noises_dn[0], self.noises_dn[-1]))
         i_n = int(_clip(np.searchsorted(self.noises_dn, x, side="right") - 1, 0, self.noises_dn.size - 2))
-        return i_n, (x - self.noises_dn[i_n]) / (self.noises_dn[i_n + 1] - self.noises_dn[i_n])
+        out = i_n, (x - self.noises_dn[i_n]) / (self.noises_dn[i_n + 1] - self.noises_dn[i_n])
+        self._bracket_memo = (noise_dn, out)
+        return out
 
     def _p_nodes(self, radius_m: float, z_m: float, noise_dn) -> np.ndarray:
         """p(a, z) at every contrast of the grid, from the table the volume integrated
