@@ -735,8 +735,9 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
 
     Returns
     -------
-    labels : (M, N) int32 array
-        0 for background, else the component's label (merged pieces share one).
+    labels : (M, N) uint16 or int32 array
+        0 for background, else the component's label (merged pieces share one); 16 bits
+        while they hold every label.
     stats : (n + 1, 5) int array
         x, y, width, height, area of each label, as
         ``cv2.connectedComponentsWithStats``; the area is 0 for the background,
