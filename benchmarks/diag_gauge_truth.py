@@ -11,6 +11,10 @@ the script prints
 * per band of true diameter: the rain the truth has there, the rain the gauge makes
   of the drops it matched there (measured size, speed and weight), their ratio, and
   the median measured / true diameter;
+* per band of measured diameter (the record's spectrum is binned so): the rain the
+  gauge puts there beside the truth's, the median true / measured diameter of its
+  matched drops, and the share of its rain from drops measured a quarter or more under
+  their size (each weighs 1 / kappa at the size it was measured at);
 * per radius class of the completeness probe: the drops the gauge counted against
   the count the model of the sample volume expects of the clip's drops
   (sum of p(a, z) over the whole streaks in the depth span of the sizes whose sample
@@ -155,6 +159,18 @@ def run(rate, background, noise, wind, seconds, seed, size, *, given_brightness=
     lost = ~np.isfinite(rows[:, 0])
     print(f" unmatched counted drops: {int(lost.sum())}, {rows[lost, 2].sum():.3f} mm/h "
           f"({rows[lost, 2].sum() / true_rate:.1%} of the truth)")
+    # the spectrum the record gives is binned by the measured size: what lands in each band
+    # of it, and how much of that is drops measured a quarter or more under their size
+    print("\n meas. D [mm]  truth [mm/h]  gauge [mm/h]  ratio   drops  median D/D_m  from >= 1.25 D_m")
+    for lo, hi in zip(BANDS_MM[:-1], BANDS_MM[1:]):
+        sel = (2e3 * rows[:, 1] >= lo) & (2e3 * rows[:, 1] < hi)
+        t = float(true_band[(dmm >= lo) & (dmm < hi)].sum())
+        got = float(rows[sel, 2].sum())
+        m = sel & np.isfinite(rows[:, 0])
+        med = float(np.median(rows[m, 0] / rows[m, 1])) if m.any() else math.nan
+        under = float(rows[m & (rows[:, 0] >= 1.25 * rows[:, 1]), 2].sum())
+        print(f" {lo:4.2f}-{hi:4.2f}   {t:12.3f}  {got:12.3f}  {got / t if t > 0 else math.nan:5.2f}  "
+              f"{int(sel.sum()):6d}  {med:12.3f}  {under / got if got > 0 else math.nan:16.2f}")
 
     # ---- counts against the model, beside the probe's
     # the volume of the window's frames (with or without the low-contrast hysteresis)
