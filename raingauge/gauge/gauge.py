@@ -1438,7 +1438,7 @@ class RainGauge:
         if prepared:
             self._prune_tracks(prepared[0]["t"])
         qs = self._photometric_qs(prepared, e_r)
-        radii = [self._drop_radius(c, e_r, c.get("vol", self.volume), q=q) for c, q in zip(prepared, qs)]
+        radii = self._drop_radii(prepared, e_r, qs)
         sized = [k for k, a in enumerate(radii) if a is not None]
         n_photo = len(prepared) - len(sized)
         rejected += n_photo
@@ -1497,6 +1497,35 @@ class RainGauge:
         for i, q in zip(idx, photometric_focus(total, w_app, e_r - ib).tolist()):
             qs[i] = q
         return qs
+
+    def _drop_radii(self, prepared: list, e_r: float, qs: list) -> list:
+        """:meth:`_drop_radius` of each candidate of ``prepared`` with its focus ``qs``
+        (:meth:`_photometric_qs`), at once where they share one volume (the same numbers)."""
+        vols = [c.get("vol", self.volume) for c in prepared]
+        if not prepared or any(v is not vols[0] for v in vols):
+            return [self._drop_radius(c, e_r, v, q=q) for c, v, q in zip(prepared, vols, qs)]
+        vol = vols[0]
+        prof = self.profile
+        f = prof.focal_length_px
+        z0 = prof.focus_distance_m
+        out = [None] * len(prepared)
+        plain = [k for k, c in enumerate(prepared) if c["photo"] is None]
+        if plain:
+            w = np.array([prepared[k]["w_app"] for k in plain], dtype=float)
+            for k, a in zip(plain, np.asarray(vol.true_radius_m(w * z0 / (2 * f)), dtype=float).tolist()):
+                out[k] = a
+        focus = [k for k, c in enumerate(prepared) if c["photo"] is not None]
+        q = np.array([qs[k] if qs[k] is not None else (
+            float(photometric_focus(prepared[k]["photo"][1], prepared[k]["w_app"], e_r - prepared[k]["photo"][0]))
+            if np.isfinite(e_r) else 1.0) for k in focus], dtype=float)
+        sharp = q >= vol.q_min
+        keep = [k for k, ok in zip(focus, sharp.tolist()) if ok]
+        if keep:
+            w_true = np.array([prepared[k]["w_app"] for k in keep], dtype=float) * np.sqrt(np.minimum(q[sharp], 1.0))
+            a0 = w_true * z0 / (2 * f)
+            for k, a in zip(keep, (w_true * np.asarray(vol.depth_m(a0), dtype=float) / (2 * f)).tolist()):
+                out[k] = a
+        return out
 
     def _drop_radius(self, c: dict, e_r: float, vol, q: float | None = None) -> float | None:
         """The radius a [m] of a measured streak ``c``: the photometric focus q of Eq. (18)
