@@ -839,7 +839,9 @@ class RainGauge:
         lap = cv2.Laplacian(cv2.GaussianBlur(half if half.dtype == np.float32 else half.astype(np.float32), (3, 3), 0),
                             cv2.CV_32F)
         sharp = cv2.norm(lap, cv2.NORM_L1) / lap.size
-        if len(self._sharpness) >= 10:
+        # (the median is taken only where the frame is under 0.6 of the sharpest: nowhere else
+        # can it be under 0.6 of the median)
+        if len(self._sharpness) >= 10 and sharp < 0.6 * max(self._sharpness):
             ref = float(np.median(self._sharpness))
             if ref > 1.0 and sharp < 0.6 * ref:
                 flags.add("lens_obscured")
@@ -1212,14 +1214,13 @@ class RainGauge:
                 (y + h < M - EDGE_MARGIN_PX)
         width = np.maximum(area / np.maximum(h, 1), 0.5)
         motion = h - width - (self.smooth_px - 1)
-        ok = whole & (h >= 6) & (motion > 1) & (area > 0)
-        a = width * prof.focus_distance_m / (2 * prof.focal_length_px)
-        v = np.maximum(motion, 1e-3) * prof.focus_distance_m / (prof.focal_length_px * prof.exposure_s)
+        idx = np.flatnonzero(whole & (h >= 6) & (motion > 1) & (area > 0))
+        a = width[idx] * prof.focus_distance_m / (2 * prof.focal_length_px)
+        v = np.maximum(motion[idx], 1e-3) * prof.focus_distance_m / (prof.focal_length_px * prof.exposure_s)
         r = velocity_log_ratio(a, v, model=self.velocity_model)
         # the box estimates read wide (threshold halo, slant): accepted drops lie within
         # [-0.75, 0.35] of this crude r; keep a margin
-        ok &= np.isfinite(r) & (r > -0.95) & (r < 0.55)
-        return np.nonzero(ok)[0] + 1
+        return idx[np.isfinite(r) & (r > -0.95) & (r < 0.55)] + 1
 
     def _measure_table(self, labels, stats, change, prev, cur, t, *, ref_bg=None, contrast=None,
                        probe: bool = False, keep=None):
