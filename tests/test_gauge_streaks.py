@@ -533,6 +533,44 @@ def test_compiled_streak_table_equals_the_array_form(background):
 
 @pytest.mark.skipif(not __import__("raingauge.gauge._kernels", fromlist=["AVAILABLE"]).AVAILABLE,
                     reason="numba not installed")
+@pytest.mark.parametrize("frames_8bit", [False, True])
+def test_compiled_table_is_its_passes_one_streak_at_a_time(frames_8bit):
+    """The compiled table measures each streak's own pixels, then its profile, then (when it
+    is wider than its detected rows) its profile again against the flanks beyond the width
+    found, one streak after the other.  That is, to the last bit, the passes taken one at a
+    time over all the streaks: the own pixels, the first pass, the second pass over the
+    wide ones."""
+    from raingauge.gauge import streaks as S
+    from raingauge.render.simulator import render_clip
+
+    prof = CAM.replace(width_px=480, height_px=270)
+    frames, _ = render_clip(prof, n_frames=3, rain_rate_mm_h=100.0, seed=5, background="uniform:0.15")
+    frames = [np.asarray(f, np.uint8) if frames_8bit else np.asarray(f, np.float32) for f in frames]
+    lin = [f.astype(np.float32) for f in frames]
+    labels, stats = detect_streaks(np.minimum(lin[1] - lin[0], lin[1] - lin[2]), c=3.0)
+    sel = np.nonzero(stats[1:, 4] > 0)[0] + 1
+    valid = stats[:, 4] > 0
+    for contrast in (None, (200.0, 150.0)):
+        kw = dict(margin_px=4, sigma_min=S.SHARP_SIGMA_PX, cur=frames[1], contrast=contrast, noise_sigma=2.0,
+                  engine="compiled")
+        own = S._own_streak_pixels(tuple(frames), labels, stats, sel, margin_px=4, cur=frames[1], prev=frames[0],
+                                   contrast=contrast, engine="compiled")
+        first = S._profile_pass(tuple(frames), labels, valid, own, baseline_width=np.zeros(sel.size), **kw)
+        wide = np.flatnonzero(np.nan_to_num(first["width_apparent"]) > first["row_width"] + S.WIDE_MARGIN_PX)
+        assert wide.size >= 5
+        again = S._profile_pass(tuple(frames), labels, valid, S._subset_streaks(own, wide),
+                                baseline_width=first["width_apparent"][wide], **kw)
+        for key in S.PER_STREAK_KEYS:
+            first[key][wide] = again[key]
+        got = S.measure_streak_table(tuple(frames), labels, stats, sel, valid=valid, cur=frames[1], prev=frames[0],
+                                     contrast=contrast, noise_sigma=2.0, engine="compiled")
+        assert got.keys() == first.keys()
+        for key in got:
+            np.testing.assert_array_equal(got[key], first[key], err_msg=key)
+
+
+@pytest.mark.skipif(not __import__("raingauge.gauge._kernels", fromlist=["AVAILABLE"]).AVAILABLE,
+                    reason="numba not installed")
 def test_compiled_median_equals_numpy():
     """The compiled loops' median (an insertion sort in place for short rows, np.sort
     beyond) is np.median's for odd, even and long inputs, and sorts NaN last as np.sort."""

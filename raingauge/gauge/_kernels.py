@@ -31,7 +31,7 @@ except ImportError:  # pragma: no cover
     AVAILABLE = False
 
 __all__ = ["AVAILABLE", "blob_partners", "change_histogram", "label_components", "own_pixels", "profile_pass", "spike_masks",
-           "union_roots", "warm_up"]
+           "streak_table", "union_roots", "warm_up"]
 
 
 def _jit(fn):
@@ -139,76 +139,54 @@ def _refine_box_width(o, v, n, cen, w0, factors, uu, vv, gain):
 
 
 @_jit
-def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, labels, valid,
-          L, x, y, w, h, y0, y1, ch, xm, ym, slope, row_width, bw, has_bw, m, sigma_min,
-          noise_sigma, factors, flank_gap, flank_min, flank_half_rows):
-    K = L.size
+def _streak(k, bwk, has_bw, p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, lut, labels, valid,
+            L, x, y, w, h, y0, y1, ch, xm, ym, slope, row_width, m, sigma_min, noise2, factors, flank_gap,
+            flank_min, flank_half_rows, p_row, p_ob, p_val, s_o, s_v, s_row, uu, vv, gain, row_sum, f_sum,
+            f_n, base, sm, buf):
+    """One measurement of streak k by :func:`_pass`, its flanks beyond half of max(detected
+    row width, ``bwk``) when ``has_bw``: (w', top, bottom, plateau, chi2, ok).  A ``lut``
+    (not empty) holds c_ref / max(E_r - (p + n) / 2, c_ref / 4) for the sums p + n of 8-bit
+    frames n-1 and n+1, when ``cur`` is frame n (:func:`_contrast_table`)."""
     N = labels.shape[1]
-    w_out = np.full(K, np.nan)
-    top_out = np.zeros(K)
-    bot_out = np.zeros(K)
-    plat_out = np.full(K, np.nan)
-    chi2_out = np.full(K, np.inf)
-    ok_out = np.zeros(K, np.bool_)
-    noise2 = max(noise_sigma, 1e-3) ** 2
-    # scratch space for the largest streak, shared by all
-    cap_max = 0
-    row_max = 0
-    for k in range(K):
-        mh = m + 2
-        if has_bw:
-            mh += int(math.ceil(0.5 * bw[k]))
-        cap_k = ch[k] * (min(x[k] + w[k] + mh, N) - max(x[k] - mh, 0))
-        cap_max = max(cap_max, cap_k)
-        row_max = max(row_max, ch[k])
-    p_row = np.empty(cap_max, np.int64)
-    p_ob = np.empty(cap_max)
-    p_val = np.empty(cap_max)
-    s_o = np.empty(cap_max)
-    s_v = np.empty(cap_max)
-    s_row = np.empty(cap_max, np.int64)
-    uu = np.empty(cap_max)
-    vv = np.empty(cap_max)
-    gain = np.empty(factors.size)
-    row_sum = np.empty(row_max)
-    f_sum = np.empty(row_max)
-    f_n = np.empty(row_max)
-    base = np.empty(row_max)
-    sm = np.empty(row_max)
-    buf = np.empty(row_max)
-    for k in range(K):
-        mh = m + 2
-        band_width = row_width[k]
-        if has_bw:
-            mh += int(math.ceil(0.5 * bw[k]))
-            if bw[k] > band_width:
-                band_width = bw[k]
-        x0 = max(x[k] - mh, 0)
-        x1 = min(x[k] + w[k] + mh, N)
-        half = 0.5 * band_width + 1.5 + m / 2
-        nrow = ch[k]
-        yk0 = y0[k]
-        lab_k = L[k]
-        np_ = 0
-        for r in range(nrow):
-            row_sum[r] = 0.0
-            f_sum[r] = 0.0
-            f_n[r] = 0.0
-        flank_at = 0.5 * band_width + flank_gap
-        for r in range(nrow):
-            gy = yk0 + r
-            ax = xm[k] + slope[k] * (gy - ym[k])
-            bx0 = int(math.floor(ax - half))
-            bx0 = min(max(bx0, x0), x1)
-            bx1 = int(math.ceil(ax + half)) + 1
-            bx1 = min(max(bx1, bx0), x1)
-            for gx in range(bx0, bx1):
-                ob = gx - ax
-                if abs(ob) > half:
-                    continue
-                lab = labels[gy, gx]
-                if lab != 0 and lab != lab_k and valid[lab]:
-                    continue
+    use_lut = lut.size > 0
+    mh = m + 2
+    band_width = row_width[k]
+    if has_bw:
+        mh += int(math.ceil(0.5 * bwk))
+        if bwk > band_width:
+            band_width = bwk
+    x0 = max(x[k] - mh, 0)
+    x1 = min(x[k] + w[k] + mh, N)
+    half = 0.5 * band_width + 1.5 + m / 2
+    nrow = ch[k]
+    yk0 = y0[k]
+    lab_k = L[k]
+    np_ = 0
+    for r in range(nrow):
+        row_sum[r] = 0.0
+        f_sum[r] = 0.0
+        f_n[r] = 0.0
+    flank_at = 0.5 * band_width + flank_gap
+    for r in range(nrow):
+        gy = yk0 + r
+        ax = xm[k] + slope[k] * (gy - ym[k])
+        bx0 = int(math.floor(ax - half))
+        bx0 = min(max(bx0, x0), x1)
+        bx1 = int(math.ceil(ax + half)) + 1
+        bx1 = min(max(bx1, bx0), x1)
+        for gx in range(bx0, bx1):
+            ob = gx - ax
+            if abs(ob) > half:
+                continue
+            lab = labels[gy, gx]
+            if lab != 0 and lab != lab_k and valid[lab]:
+                continue
+            if use_lut:
+                pv = p_[gy, gx]
+                nv = n_[gy, gx]
+                raw = np.float64(c_[gy, gx]) - 0.5 * (np.float64(pv) + np.float64(nv))
+                val = raw * lut[np.int64(pv) + np.int64(nv)]
+            else:
                 if tuple_mode:
                     raw = np.float64(c_[gy, gx]) - 0.5 * (np.float64(p_[gy, gx]) + np.float64(n_[gy, gx]))
                 else:
@@ -219,169 +197,365 @@ def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, labels
                     d = e_r - (cg - raw)
                     lim = 0.25 * c_ref
                     val = raw * (c_ref / (d if d > lim else lim))
-                p_row[np_] = r
-                p_ob[np_] = ob
-                p_val[np_] = val
-                np_ += 1
-                if has_bw and abs(ob) > flank_at:
-                    f_sum[r] += val
-                    f_n[r] += 1.0
-        if has_bw:
-            for r in range(nrow):
-                base[r] = 0.0
-                lo = max(r - flank_half_rows, 0)
-                hi = min(r + flank_half_rows, nrow - 1)
-                sv = 0.0
-                sn = 0.0
-                for q in range(lo, hi + 1):
-                    sv += f_sum[q]
-                    sn += f_n[q]
-                if sn >= flank_min:
-                    base[r] = sv / sn
-            for i in range(np_):
-                p_val[i] -= base[p_row[i]]
+            p_row[np_] = r
+            p_ob[np_] = ob
+            p_val[np_] = val
+            np_ += 1
+            if has_bw and abs(ob) > flank_at:
+                f_sum[r] += val
+                f_n[r] += 1.0
+    if has_bw:
+        for r in range(nrow):
+            base[r] = 0.0
+            lo = max(r - flank_half_rows, 0)
+            hi = min(r + flank_half_rows, nrow - 1)
+            sv = 0.0
+            sn = 0.0
+            for q in range(lo, hi + 1):
+                sv += f_sum[q]
+                sn += f_n[q]
+            if sn >= flank_min:
+                base[r] = sv / sn
         for i in range(np_):
-            row_sum[p_row[i]] += p_val[i]
-        # 3-row smoothing, zero padded
+            p_val[i] -= base[p_row[i]]
+    for i in range(np_):
+        row_sum[p_row[i]] += p_val[i]
+    # 3-row smoothing, zero padded
+    for r in range(nrow):
+        a = row_sum[r - 1] if r > 0 else 0.0
+        b = row_sum[r + 1] if r + 1 < nrow else 0.0
+        sm[r] = (a + row_sum[r] + b) / 3.0
+    # plateau: median over the middle half of the streak's rows
+    nb = 0
+    lo_y = y[k] + 0.25 * h[k]
+    hi_y = y[k] + 0.75 * h[k]
+    for r in range(nrow):
+        gy = yk0 + r
+        if gy >= lo_y and gy <= hi_y:
+            buf[nb] = sm[r]
+            nb += 1
+    if nb < 2:
         for r in range(nrow):
-            a = row_sum[r - 1] if r > 0 else 0.0
-            b = row_sum[r + 1] if r + 1 < nrow else 0.0
-            sm[r] = (a + row_sum[r] + b) / 3.0
-        # plateau: median over the middle half of the streak's rows
-        nb = 0
-        lo_y = y[k] + 0.25 * h[k]
-        hi_y = y[k] + 0.75 * h[k]
-        for r in range(nrow):
-            gy = yk0 + r
-            if gy >= lo_y and gy <= hi_y:
-                buf[nb] = sm[r]
-                nb += 1
-        if nb < 2:
-            for r in range(nrow):
-                buf[r] = sm[r]
-            nb = nrow
-        plateau = _median(buf, nb)
-        lvl = 0.5 * plateau
-        i0 = -1
-        i1 = -1
-        for r in range(nrow):
-            if sm[r] >= lvl:
-                if i0 < 0:
-                    i0 = r
-                i1 = r
-        has = i0 >= 0 and plateau > 0
-        if i0 < 0:
-            i0 = 0
-            i1 = nrow - 1
-        if i0 > 0:
-            a = sm[i0 - 1]
-            b = sm[i0]
-            first = i0 - 1 + ((lvl - a) / (b - a) if b != a else 1.0)
+            buf[r] = sm[r]
+        nb = nrow
+    plateau = _median(buf, nb)
+    lvl = 0.5 * plateau
+    i0 = -1
+    i1 = -1
+    for r in range(nrow):
+        if sm[r] >= lvl:
+            if i0 < 0:
+                i0 = r
+            i1 = r
+    has = i0 >= 0 and plateau > 0
+    if i0 < 0:
+        i0 = 0
+        i1 = nrow - 1
+    if i0 > 0:
+        a = sm[i0 - 1]
+        b = sm[i0]
+        first = i0 - 1 + ((lvl - a) / (b - a) if b != a else 1.0)
+    else:
+        first = 0.0
+    if i1 < nrow - 1:
+        a = sm[i1]
+        b = sm[i1 + 1]
+        last = i1 + ((a - lvl) / (a - b) if a != b else 0.0)
+    else:
+        last = nrow - 1.0
+    top_r = first + yk0
+    bot_r = last + yk0
+    # cross profile on the plateau rows
+    cos_t = 1.0 / math.sqrt(1.0 + slope[k] ** 2)
+    w_guess = band_width * cos_t - 2.0
+    if w_guess < 1.0:
+        w_guess = 1.0
+    lo_r = top_r + 0.5 * w_guess + 1.0
+    hi_r = bot_r - 0.5 * w_guess - 1.0
+    n_pr = math.floor(min(hi_r, y1[k] - 1.0)) - math.ceil(max(lo_r, float(yk0))) + 1
+    enough = n_pr >= 2
+    mid = 0.5 * (top_r + bot_r)
+    ns = 0
+    for i in range(np_):
+        gyf = float(yk0 + p_row[i])
+        if enough:
+            take = gyf >= lo_r and gyf <= hi_r
         else:
-            first = 0.0
-        if i1 < nrow - 1:
-            a = sm[i1]
-            b = sm[i1 + 1]
-            last = i1 + ((a - lvl) / (a - b) if a != b else 0.0)
-        else:
-            last = nrow - 1.0
-        top_r = first + yk0
-        bot_r = last + yk0
-        # cross profile on the plateau rows
-        cos_t = 1.0 / math.sqrt(1.0 + slope[k] ** 2)
-        w_guess = band_width * cos_t - 2.0
-        if w_guess < 1.0:
-            w_guess = 1.0
-        lo_r = top_r + 0.5 * w_guess + 1.0
-        hi_r = bot_r - 0.5 * w_guess - 1.0
-        n_pr = math.floor(min(hi_r, y1[k] - 1.0)) - math.ceil(max(lo_r, float(yk0))) + 1
-        enough = n_pr >= 2
-        mid = 0.5 * (top_r + bot_r)
-        ns = 0
-        for i in range(np_):
-            gyf = float(yk0 + p_row[i])
-            if enough:
-                take = gyf >= lo_r and gyf <= hi_r
-            else:
-                take = abs(gyf - mid) <= 1.0
-            if take:
-                s_o[ns] = p_ob[i] * cos_t
-                s_v[ns] = p_val[i]
-                s_row[ns] = p_row[i]
-                ns += 1
-        # apparent width: three passes of the second moment, then the least-squares box
-        rw = band_width * cos_t
-        win = np.inf
-        cen_o = 0.0
-        cen = np.nan
-        w_app = np.nan
+            take = abs(gyf - mid) <= 1.0
+        if take:
+            s_o[ns] = p_ob[i] * cos_t
+            s_v[ns] = p_val[i]
+            s_row[ns] = p_row[i]
+            ns += 1
+    # apparent width: three passes of the second moment, then the least-squares box
+    rw = band_width * cos_t
+    win = np.inf
+    cen_o = 0.0
+    cen = np.nan
+    w_app = np.nan
+    c0 = 0.0
+    for it in range(3):
         c0 = 0.0
-        for it in range(3):
-            c0 = 0.0
-            c1 = 0.0
-            c2 = 0.0
-            for i in range(ns):
-                o = s_o[i]
-                if it == 0 or abs(o - cen_o) <= win:
-                    v = s_v[i]
-                    vo = v * o
-                    c0 += v
-                    c1 += vo
-                    c2 += vo * o
-            cen = c1 / c0
-            var = c2 / c0 - cen * cen
-            t = var - 1.0 / 12.0 - sigma_min * sigma_min
-            if t < 0.0:
-                t = 0.0
-            w_app = math.sqrt(12.0 * t)
-            good = math.isfinite(w_app) and c0 > 0
-            wl = w_app if good else rw
-            wl = min(max(wl, 0.5 * rw - 1.0), rw + 2.0)
-            if good:
-                win = 0.5 * wl + 1.5
-                cen_o = cen
-        w_app = _refine_box_width(s_o, s_v, ns, cen, w_app, factors, uu, vv, gain)
-        ok = has and c0 > 0 and ns >= 6 and math.isfinite(w_app) and w_app > 0
-        # goodness of the uniform model on the plateau rows
-        n_r = 0
-        last_row = -1
+        c1 = 0.0
+        c2 = 0.0
         for i in range(ns):
-            if s_row[i] != last_row:
-                n_r += 1
-                last_row = s_row[i]
-        chi2 = np.inf
-        if ok:
-            amp = c0 / (max(n_r, 1) * w_app)
-            hw = 0.5 * w_app
-            ss = 0.0
-            for i in range(ns):
-                u = s_o[i] - cen
-                cov = min(u + 0.5, hw) - max(u - 0.5, -hw)
-                if cov < 0.0:
-                    cov = 0.0
-                res = s_v[i] - amp * cov
-                ss += res * res
-            chi2 = ss / (max(ns, 1) * noise2)
-            if not math.isfinite(chi2):
-                chi2 = np.inf
-        w_out[k] = w_app
-        top_out[k] = top_r
-        bot_out[k] = bot_r
-        plat_out[k] = plateau
-        chi2_out[k] = chi2
-        ok_out[k] = ok
+            o = s_o[i]
+            if it == 0 or abs(o - cen_o) <= win:
+                v = s_v[i]
+                vo = v * o
+                c0 += v
+                c1 += vo
+                c2 += vo * o
+        cen = c1 / c0
+        var = c2 / c0 - cen * cen
+        t = var - 1.0 / 12.0 - sigma_min * sigma_min
+        if t < 0.0:
+            t = 0.0
+        w_app = math.sqrt(12.0 * t)
+        good = math.isfinite(w_app) and c0 > 0
+        wl = w_app if good else rw
+        wl = min(max(wl, 0.5 * rw - 1.0), rw + 2.0)
+        if good:
+            win = 0.5 * wl + 1.5
+            cen_o = cen
+    w_app = _refine_box_width(s_o, s_v, ns, cen, w_app, factors, uu, vv, gain)
+    ok = has and c0 > 0 and ns >= 6 and math.isfinite(w_app) and w_app > 0
+    # goodness of the uniform model on the plateau rows
+    n_r = 0
+    last_row = -1
+    for i in range(ns):
+        if s_row[i] != last_row:
+            n_r += 1
+            last_row = s_row[i]
+    chi2 = np.inf
+    if ok:
+        amp = c0 / (max(n_r, 1) * w_app)
+        hw = 0.5 * w_app
+        ss = 0.0
+        for i in range(ns):
+            u = s_o[i] - cen
+            cov = min(u + 0.5, hw) - max(u - 0.5, -hw)
+            if cov < 0.0:
+                cov = 0.0
+            res = s_v[i] - amp * cov
+            ss += res * res
+        chi2 = ss / (max(ns, 1) * noise2)
+        if not math.isfinite(chi2):
+            chi2 = np.inf
+    return w_app, top_r, bot_r, plateau, chi2, ok
+
+
+@_jit
+def _scratch(bw, has_bw, refit, m, x, w, ch, N, n_factors):
+    """Scratch space of :func:`_streak` for the largest of the streaks, shared by all (the
+    second measurement's flanks lie at most 4 max(w, 1) + 8 px apart)."""
+    cap_max = 0
+    row_max = 0
+    for k in range(x.size):
+        mh = m + 2
+        if has_bw:
+            mh += int(math.ceil(0.5 * bw[k]))
+        if refit:
+            mh = max(mh, m + 2 + int(math.ceil(0.5 * (4.0 * max(w[k], 1) + 8.0))))
+        cap_k = ch[k] * (min(x[k] + w[k] + mh, N) - max(x[k] - mh, 0))
+        cap_max = max(cap_max, cap_k)
+        row_max = max(row_max, ch[k])
+    return (np.empty(cap_max, np.int64), np.empty(cap_max), np.empty(cap_max), np.empty(cap_max), np.empty(cap_max),
+            np.empty(cap_max, np.int64), np.empty(cap_max), np.empty(cap_max), np.empty(n_factors), np.empty(row_max),
+            np.empty(row_max), np.empty(row_max), np.empty(row_max), np.empty(row_max), np.empty(row_max))
+
+
+@_jit
+def _streak_refit(k, bwk, has_bw, wide_margin, p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast,
+                  lut, labels, valid, L, x, y, w, h, y0, y1, ch, xm, ym, slope, row_width, m, sigma_min, noise2, factors,
+                  flank_gap, flank_min, flank_half_rows, sc, w_out, top_out, bot_out, plat_out, chi2_out, ok_out):
+    """Streak k measured by :func:`_streak`, and with ``wide_margin`` (not NaN) measured
+    again at once (its pixels still in the cache) when wider than its detected rows by more
+    than it, against the flanks beyond the width found; written to the outputs."""
+    p_row, p_ob, p_val, s_o, s_v, s_row, uu, vv, gain, row_sum, f_sum, f_n, base, sm, buf = sc
+    w_app, top_r, bot_r, plateau, chi2, ok = _streak(
+        k, bwk, has_bw, p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, lut, labels, valid,
+        L, x, y, w, h, y0, y1, ch, xm, ym, slope, row_width, m, sigma_min, noise2, factors, flank_gap,
+        flank_min, flank_half_rows, p_row, p_ob, p_val, s_o, s_v, s_row, uu, vv, gain, row_sum, f_sum,
+        f_n, base, sm, buf)
+    # (NaN is not wide; +inf is, and is measured again as of no width)
+    if wide_margin == wide_margin and (w_app == np.inf or w_app > row_width[k] + wide_margin):
+        b2 = w_app if math.isfinite(w_app) else 0.0
+        b2 = min(max(b2, 0.0), 4.0 * max(w[k], 1) + 8.0)
+        w_app, top_r, bot_r, plateau, chi2, ok = _streak(
+            k, b2, True, p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, lut, labels, valid,
+            L, x, y, w, h, y0, y1, ch, xm, ym, slope, row_width, m, sigma_min, noise2, factors, flank_gap,
+            flank_min, flank_half_rows, p_row, p_ob, p_val, s_o, s_v, s_row, uu, vv, gain, row_sum, f_sum,
+            f_n, base, sm, buf)
+    w_out[k] = w_app
+    top_out[k] = top_r
+    bot_out[k] = bot_r
+    plat_out[k] = plateau
+    chi2_out[k] = chi2
+    ok_out[k] = ok
+
+
+@_jit
+def _pass_outputs(K):
+    return (np.full(K, np.nan), np.zeros(K), np.zeros(K), np.full(K, np.nan), np.full(K, np.inf),
+            np.zeros(K, np.bool_))
+
+
+@_jit
+def _pass(p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast, lut, labels, valid,
+          L, x, y, w, h, y0, y1, ch, xm, ym, slope, row_width, bw, has_bw, m, sigma_min,
+          noise_sigma, factors, flank_gap, flank_min, flank_half_rows, wide_margin):
+    """:func:`_streak_refit` over the K streaks: (w', top, bottom, plateau, chi2, ok)."""
+    w_out, top_out, bot_out, plat_out, chi2_out, ok_out = _pass_outputs(L.size)
+    noise2 = max(noise_sigma, 1e-3) ** 2
+    sc = _scratch(bw, has_bw, wide_margin == wide_margin, m, x, w, ch, labels.shape[1], factors.size)
+    for k in range(L.size):
+        bwk = bw[k] if has_bw else 0.0
+        _streak_refit(k, bwk, has_bw, wide_margin, p_, c_, n_, tuple_mode, cur, has_cur, e_r,
+                      c_ref, has_contrast, lut, labels, valid, L, x, y, w, h, y0, y1, ch, xm, ym, slope, row_width, m,
+                      sigma_min, noise2, factors, flank_gap, flank_min, flank_half_rows, sc, w_out, top_out, bot_out,
+                      plat_out, chi2_out, ok_out)
     return w_out, top_out, bot_out, plat_out, chi2_out, ok_out
+
+
+@_jit
+def _table(p_, c_, n_, tuple_mode, cur, has_cur, prev, has_prev, e_r, c_ref, has_contrast, lut, labels, valid, L,
+           x, y, w, h, x0, y0, y1, ch, m, sigma_min, noise_sigma, factors, flank_gap, flank_min, flank_half_rows,
+           wide_margin):
+    """:func:`_own` and :func:`_pass` (flanks beyond the detected rows, ``wide_margin``)
+    streak by streak, each streak's pixels still in the cache from the first when the
+    second reads them."""
+    K = L.size
+    total, biggest = _own_space(w, h)
+    vals = np.empty(biggest)
+    own_k = np.empty(total, np.int64)
+    own_y = np.empty(total, np.int64)
+    own_x = np.empty(total, np.int64)
+    xm = np.empty(K)
+    ym = np.empty(K)
+    slope = np.empty(K)
+    row_width = np.empty(K)
+    bg_dn = np.full(K, np.nan)
+    beta = np.full(K, np.nan)
+    w_out, top_out, bot_out, plat_out, chi2_out, ok_out = _pass_outputs(K)
+    noise2 = max(noise_sigma, 1e-3) ** 2
+    bw = np.zeros(K)
+    sc = _scratch(bw, True, wide_margin == wide_margin, m, x, w, ch, labels.shape[1], factors.size)
+    n_all = 0
+    for k in range(K):
+        n_all = _own_one(k, n_all, p_, c_, n_, tuple_mode, cur, has_cur, prev, has_prev, e_r, c_ref, has_contrast,
+                         labels, L, x, y, w, h, x0, y0, vals, own_k, own_y, own_x, xm, ym, slope, row_width, bg_dn,
+                         beta)
+        _streak_refit(k, 0.0, True, wide_margin, p_, c_, n_, tuple_mode, cur, has_cur, e_r, c_ref, has_contrast,
+                      lut, labels, valid, L, x, y, w, h, y0, y1, ch, xm, ym, slope, row_width, m, sigma_min, noise2,
+                      factors, flank_gap, flank_min, flank_half_rows, sc, w_out, top_out, bot_out, plat_out,
+                      chi2_out, ok_out)
+    return (xm, ym, slope, row_width, bg_dn, beta, own_k[:n_all], own_y[:n_all], own_x[:n_all], w_out, top_out,
+            bot_out, plat_out, chi2_out, ok_out)
+
+
+@_jit
+def _own_one(k, n_all, p_, c_, n_, tuple_mode, cur, has_cur, prev, has_prev, e_r, c_ref, has_contrast, labels, L, x,
+             y, w, h, x0, y0, vals, own_k, own_y, own_x, xm, ym, slope, row_width, bg_dn, beta):
+    """Streak k's own pixels for :func:`_own` (appended to own_k, own_y, own_x from
+    ``n_all``) and its entries of xm, ym, slope, row_width, bg_dn and beta; returns the
+    new count of own pixels."""
+    start = n_all
+    lab_k = L[k]
+    n_rows = 0
+    s0 = 0.0
+    sx = 0.0
+    sy = 0.0
+    s_bg = 0.0
+    sb = 0.0
+    sbb = 0.0
+    sd = 0.0
+    sbd = 0.0
+    for gy in range(y[k], y[k] + h[k]):
+        row_has = False
+        for gx in range(x[k], x[k] + w[k]):
+            if labels[gy, gx] != lab_k:
+                continue
+            row_has = True
+            if tuple_mode:
+                raw = np.float64(c_[gy, gx]) - 0.5 * (np.float64(p_[gy, gx]) + np.float64(n_[gy, gx]))
+            else:
+                raw = np.float64(c_[gy, gx])
+            val = raw
+            if has_cur:
+                cg = np.float64(cur[gy, gx])
+                s_bg += cg - raw
+                if has_contrast:
+                    d = e_r - (cg - raw)
+                    lim = 0.25 * c_ref
+                    val = raw * (c_ref / (d if d > lim else lim))
+                if has_prev:
+                    b = np.float64(prev[gy, gx])
+                    dd = cg - b
+                    sb += b
+                    sbb += b * b
+                    sd += dd
+                    sbd += b * dd
+            vals[n_all - start] = val
+            own_k[n_all] = k
+            own_y[n_all] = gy
+            own_x[n_all] = gx
+            n_all += 1
+            wt = val if val > 0.0 else 0.0
+            s0 += wt
+            sx += wt * (gx - x0[k])
+            sy += wt * (gy - y0[k])
+        if row_has:
+            n_rows += 1
+    n_own = n_all - start
+    safe = s0 if s0 > 0 else 1.0
+    xm_l = sx / safe
+    ym_l = sy / safe
+    myy = 0.0
+    mxy = 0.0
+    for i in range(n_own):
+        wt = vals[i] if vals[i] > 0.0 else 0.0
+        dy = (own_y[start + i] - y0[k]) - ym_l
+        myy += wt * dy * dy
+        mxy += wt * ((own_x[start + i] - x0[k]) - xm_l) * dy
+    myy /= safe
+    mxy /= safe
+    if s0 > 0:
+        xm[k] = xm_l + x0[k]
+        ym[k] = ym_l + y0[k]
+        slope[k] = mxy / myy if myy > 1e-9 else 0.0
+    else:
+        xm[k] = x[k] + w[k] / 2.0
+        ym[k] = y[k] + h[k] / 2.0
+        slope[k] = 0.0
+    row_width[k] = n_own / max(n_rows, 1)
+    if has_cur:
+        bg_dn[k] = s_bg / n_own
+        if has_prev:
+            n = max(n_own, 1)
+            vb = sbb / n - (sb / n) ** 2
+            cov = sbd / n - sb * sd / n ** 2
+            if n_own >= 6 and vb >= 16.0:
+                beta[k] = -cov / vb
+    return n_all
+
+
+@_jit
+def _own_space(w, h):
+    """Pixels of all the streaks' boxes, and of the biggest."""
+    total = 0
+    biggest = 0
+    for k in range(w.size):
+        total += w[k] * h[k]
+        biggest = max(biggest, w[k] * h[k])
+    return total, biggest
 
 
 @_jit
 def _own(p_, c_, n_, tuple_mode, cur, has_cur, prev, has_prev, e_r, c_ref, has_contrast, labels, L, x, y, w, h,
          x0, y0):
     K = L.size
-    total = 0
-    biggest = 0
-    for k in range(K):
-        total += w[k] * h[k]
-        biggest = max(biggest, w[k] * h[k])
+    total, biggest = _own_space(w, h)
     # (one scratch array for all streaks: an array allocated in the loop would be
     # reference-counted in the inner loops)
     vals = np.empty(biggest)
@@ -396,83 +570,9 @@ def _own(p_, c_, n_, tuple_mode, cur, has_cur, prev, has_prev, e_r, c_ref, has_c
     beta = np.full(K, np.nan)
     n_all = 0
     for k in range(K):
-        start = n_all
-        lab_k = L[k]
-        n_rows = 0
-        s0 = 0.0
-        sx = 0.0
-        sy = 0.0
-        s_bg = 0.0
-        sb = 0.0
-        sbb = 0.0
-        sd = 0.0
-        sbd = 0.0
-        for gy in range(y[k], y[k] + h[k]):
-            row_has = False
-            for gx in range(x[k], x[k] + w[k]):
-                if labels[gy, gx] != lab_k:
-                    continue
-                row_has = True
-                if tuple_mode:
-                    raw = np.float64(c_[gy, gx]) - 0.5 * (np.float64(p_[gy, gx]) + np.float64(n_[gy, gx]))
-                else:
-                    raw = np.float64(c_[gy, gx])
-                val = raw
-                if has_cur:
-                    cg = np.float64(cur[gy, gx])
-                    s_bg += cg - raw
-                    if has_contrast:
-                        d = e_r - (cg - raw)
-                        lim = 0.25 * c_ref
-                        val = raw * (c_ref / (d if d > lim else lim))
-                    if has_prev:
-                        b = np.float64(prev[gy, gx])
-                        dd = cg - b
-                        sb += b
-                        sbb += b * b
-                        sd += dd
-                        sbd += b * dd
-                vals[n_all - start] = val
-                own_k[n_all] = k
-                own_y[n_all] = gy
-                own_x[n_all] = gx
-                n_all += 1
-                wt = val if val > 0.0 else 0.0
-                s0 += wt
-                sx += wt * (gx - x0[k])
-                sy += wt * (gy - y0[k])
-            if row_has:
-                n_rows += 1
-        n_own = n_all - start
-        safe = s0 if s0 > 0 else 1.0
-        xm_l = sx / safe
-        ym_l = sy / safe
-        myy = 0.0
-        mxy = 0.0
-        for i in range(n_own):
-            wt = vals[i] if vals[i] > 0.0 else 0.0
-            dy = (own_y[start + i] - y0[k]) - ym_l
-            myy += wt * dy * dy
-            mxy += wt * ((own_x[start + i] - x0[k]) - xm_l) * dy
-        myy /= safe
-        mxy /= safe
-        if s0 > 0:
-            xm[k] = xm_l + x0[k]
-            ym[k] = ym_l + y0[k]
-            slope[k] = mxy / myy if myy > 1e-9 else 0.0
-        else:
-            xm[k] = x[k] + w[k] / 2.0
-            ym[k] = y[k] + h[k] / 2.0
-            slope[k] = 0.0
-        row_width[k] = n_own / max(n_rows, 1)
-        if has_cur:
-            bg_dn[k] = s_bg / n_own
-            if has_prev:
-                n = max(n_own, 1)
-                vb = sbb / n - (sb / n) ** 2
-                cov = sbd / n - sb * sd / n ** 2
-                if n_own >= 6 and vb >= 16.0:
-                    beta[k] = -cov / vb
+        n_all = _own_one(k, n_all, p_, c_, n_, tuple_mode, cur, has_cur, prev, has_prev, e_r, c_ref, has_contrast,
+                         labels, L, x, y, w, h, x0, y0, vals, own_k, own_y, own_x, xm, ym, slope, row_width, bg_dn,
+                         beta)
     return xm, ym, slope, row_width, bg_dn, beta, own_k[:n_all], own_y[:n_all], own_x[:n_all]
 
 
@@ -505,6 +605,20 @@ def _f64(a):
 
 
 _DUMMY = np.zeros((1, 1), np.float32)
+_NO_LUT = np.zeros(0)
+
+
+def _contrast_table(change, cur, e_r, c_ref):
+    """c_ref / max(E_r - (p + n) / 2, c_ref / 4) for every sum p + n of two 8-bit frames
+    (511,): the factor of Eq. (18)'s division by the local contrast, E_r - (cur - change),
+    when ``change`` is the three 8-bit frames and ``cur`` the middle one (cur - change is
+    then (p + n) / 2 exactly); else empty (the division is taken pixel by pixel)."""
+    if not (isinstance(change, tuple) and cur is change[1] and cur.dtype == np.uint8
+            and all(f.dtype == np.uint8 for f in change)):
+        return _NO_LUT
+    d = e_r - 0.5 * np.arange(511, dtype=np.float64)
+    lim = 0.25 * c_ref
+    return c_ref / np.where(d > lim, d, lim)
 
 
 def profile_pass(change, labels, valid, own, *, margin_px, sigma_min, cur, contrast, noise_sigma,
@@ -524,12 +638,32 @@ def profile_pass(change, labels, valid, own, *, margin_px, sigma_min, cur, contr
     else:
         bw = np.zeros(K)
 
-    return _pass(p_, c_, n_, tuple_mode, cur_a, has_cur, e_r, c_ref, has_contrast, np.ascontiguousarray(labels),
+    lut = _contrast_table(change, cur, e_r, c_ref) if has_contrast and has_cur else _NO_LUT
+    return _pass(p_, c_, n_, tuple_mode, cur_a, has_cur, e_r, c_ref, has_contrast, lut, np.ascontiguousarray(labels),
                  np.ascontiguousarray(valid, dtype=np.bool_), _i64(own["L"]), _i64(own["x"]), _i64(own["y"]),
                  _i64(own["w"]), _i64(own["h"]), _i64(own["y0"]), _i64(own["y1"]), _i64(own["ch"]), _f64(own["xm"]),
                  _f64(own["ym"]), _f64(own["slope"]), _f64(own["row_width"]), _f64(bw), has_bw, int(margin_px),
                  float(sigma_min), float(noise_sigma), _f64(factors), float(flank_gap), float(flank_min),
-                 int(flank_half_rows))
+                 int(flank_half_rows), math.nan)
+
+
+def streak_table(change, labels, valid, L, x, y, w, h, x0, y0, y1, ch, *, cur, prev, contrast, margin_px, sigma_min,
+                 noise_sigma, factors, flank_gap, flank_min, flank_half_rows, wide_margin):
+    """:func:`own_pixels` and :func:`profile_pass` (against the flanks beyond the detected rows,
+    measured again when wider than them by ``wide_margin``) in one loop over the streaks:
+    (xm, ym, slope, row_width, background_dn, beta, own_k, own_y, own_x, w', top, bottom
+    (before the cap offset), plateau, chi2, ok)."""
+    p_, c_, n_, tuple_mode = _frames(change)
+    has_cur = cur is not None
+    has_prev = prev is not None
+    e_r, c_ref = (float(contrast[0]), float(contrast[1])) if contrast is not None else (0.0, 1.0)
+    lut = _contrast_table(change, cur, e_r, c_ref) if contrast is not None and has_cur else _NO_LUT
+    return _table(p_, c_, n_, tuple_mode, np.ascontiguousarray(cur) if has_cur else _DUMMY, has_cur,
+                  np.ascontiguousarray(prev) if has_prev else _DUMMY, has_prev, e_r, c_ref, contrast is not None, lut,
+                  np.ascontiguousarray(labels), np.ascontiguousarray(valid, dtype=np.bool_), _i64(L), _i64(x), _i64(y),
+                  _i64(w), _i64(h), _i64(x0), _i64(y0), _i64(y1), _i64(ch), int(margin_px), float(sigma_min),
+                  float(noise_sigma), _f64(factors), float(flank_gap), float(flank_min), int(flank_half_rows),
+                  math.nan if wide_margin is None else float(wide_margin))
 
 
 @_jit
@@ -549,11 +683,37 @@ def _scan_run(mask, y, x0, x1, start, n, xs, xe):
     return start, n
 
 
+def _byte_segments():
+    """For each pattern of 8 bits (bit i: pixel i of a word set), its runs of set bits:
+    (count (256,), first bit (256, 4), last bit (256, 4))."""
+    n = np.zeros(256, np.int64)
+    first = np.zeros((256, 4), np.int64)
+    last = np.zeros((256, 4), np.int64)
+    for b in range(256):
+        i = 0
+        while i < 8:
+            if b >> i & 1:
+                j = i
+                while j + 1 < 8 and b >> (j + 1) & 1:
+                    j += 1
+                first[b, n[b]] = i
+                last[b, n[b]] = j
+                n[b] += 1
+                i = j + 1
+            else:
+                i += 1
+    return n, first, last
+
+
+_SEG_N, _SEG_FIRST, _SEG_LAST = _byte_segments()
+
+
 @_jit
 def _runs(mask, words, use_words):
     """The runs of nonzero pixels of ``mask`` row by row: (row start index (M + 1,), first
-    column, last column (inclusive)) of each run, in raster order.  Zero 8-pixel words of
-    ``words`` (the mask's rows as uint64, when ``use_words``) are skipped whole."""
+    column, last column (inclusive)) of each run, in raster order.  With ``use_words`` the
+    mask's rows are read as 8-pixel words (``words``, uint64): a zero word is skipped whole,
+    and the set pixels of the others, gathered into 8 bits, give their runs from a table."""
     M, N = mask.shape
     # (room for the most runs a mask can hold: untouched memory costs nothing, and arrays
     # not rebound in the loop keep it free of reference counting)
@@ -563,18 +723,46 @@ def _runs(mask, words, use_words):
     row_ptr = np.empty(M + 1, np.int64)
     n = 0
     nw = N // 8 if use_words else 0
+    # a byte's nonzero bits folded into its lowest bit, the 8 lowest bits into the top byte
+    # (byte i to bit 56 + i: the words are little-endian, pixel 8 wi + i in byte i)
+    s1 = np.uint64(1)
+    s2 = np.uint64(2)
+    s4 = np.uint64(4)
+    s56 = np.uint64(56)
+    low_bits = np.uint64(0x0101010101010101)
+    gather = np.uint64(0x0102040810204080)
     for y in range(M):
         row_ptr[y] = n
         start = -1
         for wi in range(nw):
-            if words[y, wi] == 0:
+            wd = words[y, wi]
+            if wd == 0:
                 if start >= 0:
                     xs[n] = start
                     xe[n] = 8 * wi - 1
                     n += 1
                     start = -1
                 continue
-            start, n = _scan_run(mask, y, 8 * wi, 8 * wi + 8, start, n, xs, xe)
+            t = wd | (wd >> s4)
+            t |= t >> s2
+            t |= t >> s1
+            b = np.int64(((t & low_bits) * gather) >> s56)
+            base = 8 * wi
+            if start >= 0 and (b & 1) == 0:
+                xs[n] = start
+                xe[n] = base - 1
+                n += 1
+                start = -1
+            for j in range(_SEG_N[b]):
+                first = _SEG_FIRST[b, j]
+                if first > 0 or start < 0:
+                    start = base + first
+                last = _SEG_LAST[b, j]
+                if last < 7:
+                    xs[n] = start
+                    xe[n] = base + last
+                    n += 1
+                    start = -1
         start, n = _scan_run(mask, y, 8 * nw, N, start, n, xs, xe)
         if start >= 0:
             xs[n] = start
@@ -625,10 +813,13 @@ def _run_components(row_ptr, xs, xe):
         if xe[i] + 1 > width:
             width = xe[i] + 1
     bw = width // 2 + 1
+    root = np.empty(n, np.int64)
+    for i in range(n):
+        root[i] = _find(parent, i)
     key = np.full(n, np.iinfo(np.int64).max)
     for y in range(M):
         for i in range(row_ptr[y], row_ptr[y + 1]):
-            r = _find(parent, i)
+            r = root[i]
             kk = (y // 2) * bw + xs[i] // 2
             if kk < key[r]:
                 key[r] = kk
@@ -651,7 +842,7 @@ def _run_components(row_ptr, xs, xe):
     area = np.zeros(n_comp + 1, np.int64)
     for y in range(M):
         for i in range(row_ptr[y], row_ptr[y + 1]):
-            lab = comp_label[_find(parent, i)]
+            lab = comp_label[root[i]]
             run_label[i] = lab
             x0[lab] = min(x0[lab], xs[i])
             x1[lab] = max(x1[lab], xe[i])

@@ -1703,17 +1703,20 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     L = np.asarray(select, dtype=np.int64)
     if valid is None:
         valid = stats[:, 4] > 0
+    if baseline and L.size and _use_compiled(engine):
+        return _compiled_table(change, labels, stats, L, valid, margin_px=margin_px, sigma_min=sigma_min, cur=cur,
+                               prev=prev, contrast=contrast, noise_sigma=noise_sigma)
     own = _own_streak_pixels(change, labels, stats, L, margin_px=margin_px, cur=cur, prev=prev, contrast=contrast,
                              engine=engine)
     kw = dict(margin_px=margin_px, sigma_min=sigma_min, cur=cur, contrast=contrast, noise_sigma=noise_sigma,
               engine=engine)
     if not baseline:
         return _profile_pass(change, labels, valid, own, **kw)
-    # against the flanks just beyond the detected pixels
+    # against the flanks just beyond the detected pixels; a faint, wide (defocused) streak is
+    # detected only along its core, and its flanks there lie on it: measured again against
+    # the flanks beyond the width found (its own pixels, axis and Eq. 18 fit are those of the
+    # first pass)
     first = _profile_pass(change, labels, valid, own, baseline_width=np.zeros(L.size), **kw)
-    # a faint, wide (defocused) streak is detected only along its core, and its flanks there
-    # lie on it: measured again against the flanks beyond the width found (its own pixels,
-    # axis and Eq. 18 fit are those of the first pass)
     wide = np.flatnonzero(np.nan_to_num(first["width_apparent"]) > first["row_width"] + WIDE_MARGIN_PX)
     if wide.size:
         again = _profile_pass(change, labels, valid, _subset_streaks(own, wide),
@@ -1721,6 +1724,31 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
         for key in PER_STREAK_KEYS:
             first[key][wide] = again[key]
     return first
+
+
+def _compiled_table(change, labels, stats, L, valid, *, margin_px, sigma_min, cur, prev, contrast,
+                    noise_sigma) -> dict:
+    """:func:`measure_streak_table` (with its baseline) by the compiled loop: each streak's own
+    pixels (:func:`_own_streak_pixels`) and both passes of :func:`_profile_pass` one streak
+    after the other, so that its pixels are still in the cache when measured again."""
+    M, N = labels.shape
+    x, y, w, h = (stats[L, k].astype(np.int64) for k in range(4))
+    m = int(margin_px)
+    x0 = np.maximum(x - (m + 2), 0)
+    y0 = np.maximum(y - m, 0)
+    y1 = np.minimum(y + h + m, M)
+    ch = y1 - y0
+    (xm, ym, slope, row_width, bg_dn, beta, own_k, own_y, own_x, w_app, top_r, bot_r, plateau, chi2,
+     ok) = _kernels.streak_table(change, labels, valid, L, x, y, w, h, x0, y0, y1, ch, cur=cur, prev=prev,
+                                 contrast=contrast, margin_px=m, sigma_min=sigma_min, noise_sigma=noise_sigma,
+                                 factors=_BOX_FACTORS, flank_gap=FLANK_GAP_PX, flank_min=FLANK_MIN_PIXELS,
+                                 flank_half_rows=FLANK_HALF_ROWS, wide_margin=WIDE_MARGIN_PX)
+    cap = cap_offset_px(np.where(np.isfinite(w_app), w_app, 1.0))
+    top = top_r + cap
+    bot = bot_r - cap
+    return {"label": L, "xm": xm, "ym": ym, "slope": slope, "width_apparent": w_app, "top": top, "bottom": bot,
+            "motion": bot - top, "plateau": plateau, "background_dn": bg_dn, "beta": beta, "chi2": chi2, "ok": ok,
+            "row_width": row_width, "own_k": own_k, "own_y": own_y, "own_x": own_x}
 
 
 #: Per-streak entries of :func:`_own_streak_pixels` (the others list its own pixels).
