@@ -621,7 +621,8 @@ def test_streak_table_reads_8bit_frames_as_their_float_image(engine):
 def test_compiled_labelling_equals_opencv():
     """The compiled labelling from a mask's runs (raingauge.gauge._kernels.label_components)
     gives OpenCV's 8-connected labels, their numbering and stats, on random masks of any
-    shape and density (rows of a ragged last 8-pixel word included), an empty one and a dense
+    shape, density and nonzero values (rows read as 8-pixel words, and with a ragged last
+    word, included), an empty one and a dense
     one past 65000 pixels; 16-bit labels up to 65536 labels (a dense mask of few components
     too), 32-bit ones past them."""
     import cv2
@@ -637,9 +638,11 @@ def test_compiled_labelling_equals_opencv():
 
     rng = np.random.default_rng(11)
     masks = [np.zeros((30, 40), np.uint8), ((rng.random((400, 400)) < 0.6) * 255).astype(np.uint8)]
-    for _ in range(150):
+    for k in range(150):
         shape = (int(rng.integers(1, 50)), int(rng.integers(1, 70)))
-        masks.append(((rng.random(shape) < rng.uniform(0.01, 0.7)) * 255).astype(np.uint8))
+        # (any nonzero byte is set: 255, or 1-255 at random)
+        value = 255 if k % 2 else rng.integers(1, 256, shape)
+        masks.append(((rng.random(shape) < rng.uniform(0.01, 0.7)) * value).astype(np.uint8))
     for mask in masks:
         n, labels, stats = opencv(mask)
         n2, labels2, stats2 = _kernels.label_components(mask)

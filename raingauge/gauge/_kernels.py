@@ -426,17 +426,7 @@ def _table(p_, c_, n_, tuple_mode, cur, has_cur, prev, has_prev, e_r, c_ref, has
     streak by streak, each streak's pixels still in the cache from the first when the
     second reads them."""
     K = L.size
-    total, biggest = _own_space(w, h)
-    vals = np.empty(biggest)
-    own_k = np.empty(total, np.int64)
-    own_y = np.empty(total, np.int64)
-    own_x = np.empty(total, np.int64)
-    xm = np.empty(K)
-    ym = np.empty(K)
-    slope = np.empty(K)
-    row_width = np.empty(K)
-    bg_dn = np.full(K, np.nan)
-    beta = np.full(K, np.nan)
+    vals, own_k, own_y, own_x, xm, ym, slope, row_width, bg_dn, beta = _own_outputs(w, h)
     w_out, top_out, bot_out, plat_out, chi2_out, ok_out = _pass_outputs(K)
     noise2 = max(noise_sigma, 1e-3) ** 2
     bw = np.zeros(K)
@@ -541,33 +531,26 @@ def _own_one(k, n_all, p_, c_, n_, tuple_mode, cur, has_cur, prev, has_prev, e_r
 
 
 @_jit
-def _own_space(w, h):
-    """Pixels of all the streaks' boxes, and of the biggest."""
+def _own_outputs(w, h):
+    """The outputs of :func:`_own` for streaks of boxes w x h, with room for all their pixels,
+    and a scratch array for the biggest (one for all streaks: an array allocated in the loop
+    would be reference-counted in the inner loops): (vals, own_k, own_y, own_x, xm, ym,
+    slope, row_width, bg_dn, beta)."""
+    K = w.size
     total = 0
     biggest = 0
-    for k in range(w.size):
+    for k in range(K):
         total += w[k] * h[k]
         biggest = max(biggest, w[k] * h[k])
-    return total, biggest
+    return (np.empty(biggest), np.empty(total, np.int64), np.empty(total, np.int64), np.empty(total, np.int64),
+            np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.full(K, np.nan), np.full(K, np.nan))
 
 
 @_jit
 def _own(p_, c_, n_, tuple_mode, cur, has_cur, prev, has_prev, e_r, c_ref, has_contrast, labels, L, x, y, w, h,
          x0, y0):
     K = L.size
-    total, biggest = _own_space(w, h)
-    # (one scratch array for all streaks: an array allocated in the loop would be
-    # reference-counted in the inner loops)
-    vals = np.empty(biggest)
-    own_k = np.empty(total, np.int64)
-    own_y = np.empty(total, np.int64)
-    own_x = np.empty(total, np.int64)
-    xm = np.empty(K)
-    ym = np.empty(K)
-    slope = np.empty(K)
-    row_width = np.empty(K)
-    bg_dn = np.full(K, np.nan)
-    beta = np.full(K, np.nan)
+    vals, own_k, own_y, own_x, xm, ym, slope, row_width, bg_dn, beta = _own_outputs(w, h)
     n_all = 0
     for k in range(K):
         n_all = _own_one(k, n_all, p_, c_, n_, tuple_mode, cur, has_cur, prev, has_prev, e_r, c_ref, has_contrast,

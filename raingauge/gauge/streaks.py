@@ -1726,18 +1726,25 @@ def measure_streak_table(change: np.ndarray, labels: np.ndarray, stats: np.ndarr
     return first
 
 
-def _compiled_table(change, labels, stats, L, valid, *, margin_px, sigma_min, cur, prev, contrast,
-                    noise_sigma) -> dict:
-    """:func:`measure_streak_table` (with its baseline) by the compiled loop: each streak's own
-    pixels (:func:`_own_streak_pixels`) and both passes of :func:`_profile_pass` one streak
-    after the other, so that its pixels are still in the cache when measured again."""
-    M, N = labels.shape
+def _streak_boxes(stats, L, margin_px: int, M: int):
+    """The boxes x, y, w, h of the streaks ``L`` (int64), the corner x0, y0 of the crop in
+    which their moments are taken (the crop of the pass without a wider baseline), and the
+    rows y0..y1 - 1 (ch of them) the passes measure, ``margin_px`` beyond the box."""
     x, y, w, h = (stats[L, k].astype(np.int64) for k in range(4))
     m = int(margin_px)
     x0 = np.maximum(x - (m + 2), 0)
     y0 = np.maximum(y - m, 0)
     y1 = np.minimum(y + h + m, M)
-    ch = y1 - y0
+    return x, y, w, h, x0, y0, y1, y1 - y0
+
+
+def _compiled_table(change, labels, stats, L, valid, *, margin_px, sigma_min, cur, prev, contrast,
+                    noise_sigma) -> dict:
+    """:func:`measure_streak_table` (with its baseline) by the compiled loop: each streak's own
+    pixels (:func:`_own_streak_pixels`) and both passes of :func:`_profile_pass` one streak
+    after the other, so that its pixels are still in the cache when measured again."""
+    x, y, w, h, x0, y0, y1, ch = _streak_boxes(stats, L, margin_px, labels.shape[0])
+    m = int(margin_px)
     (xm, ym, slope, row_width, bg_dn, beta, own_k, own_y, own_x, w_app, top_r, bot_r, plateau, chi2,
      ok) = _kernels.streak_table(change, labels, valid, L, x, y, w, h, x0, y0, y1, ch, cur=cur, prev=prev,
                                  contrast=contrast, margin_px=m, sigma_min=sigma_min, noise_sigma=noise_sigma,
@@ -1776,13 +1783,7 @@ def _own_streak_pixels(change, labels, stats, L, *, margin_px, cur, prev, contra
     slope of Eq. (18) on them."""
     K = L.size
     M, N = labels.shape
-    x, y, w, h = (stats[L, k].astype(np.int64) for k in range(4))
-    m = int(margin_px)
-    # (the moments are taken in the crop of the pass without a wider baseline)
-    x0 = np.maximum(x - (m + 2), 0)
-    y0 = np.maximum(y - m, 0)
-    y1 = np.minimum(y + h + m, M)
-    ch = y1 - y0
+    x, y, w, h, x0, y0, y1, ch = _streak_boxes(stats, L, margin_px, M)
     if _use_compiled(engine):
         xm, ym, slope, row_width, bg_dn, beta, ko, oy, ox = _kernels.own_pixels(
             change, labels, L, x, y, w, h, x0, y0, cur=cur, prev=prev, contrast=contrast)
