@@ -653,3 +653,63 @@ def test_window_rate_takes_every_drop_at_the_latest_correction(monkeypatch):
     rate = 3.6e6 * math.pi / 6.0 * latest / duration
     assert rec["rain_rate_mm_h"] == pytest.approx(rate, rel=1e-6)
     assert abs(latest / stored - 1.0) > 1e-3
+
+
+def test_pinned_probe_injects_one_size_at_one_depth(volume):
+    """Pinned, every drop has the given radius and depth and weighs in its class and depth
+    span; unpinned, the drops are drawn over the classes again; a pin outside the classes
+    or at no depth is refused with the reason."""
+    probe = _probe(volume, per_frame=10)
+    a, z = 0.5e-3, 2.48
+    probe.pin(a, z)
+    near, far = volume.depth_span(a)
+    plan = probe.plan(CAM.shape, slope=0.0)
+    assert len(plan) == 10
+    for p in plan:
+        assert p["radius_m"] == a and p["depth_m"] == z
+        assert CLASS_EDGES_M[p["class"]] <= a < CLASS_EDGES_M[p["class"] + 1]
+        assert p["span_m"] == pytest.approx(float(far - near))
+    probe.pin(None, None)
+    radii = [p["radius_m"] for _ in range(5) for p in probe.plan(CAM.shape, slope=0.0)]
+    assert len(set(radii)) > 20
+    with pytest.raises(ValueError, match="outside the probe's classes"):
+        probe.pin(5e-3, 2.5)
+    with pytest.raises(ValueError, match="positive radius and depth"):
+        probe.pin(0.5e-3, 0.0)
+
+
+def test_outcomes_log_every_injection(volume):
+    """With ``outcomes`` a list, each recorded drop leaves its radius, depth, whether it was
+    counted and the model's p; the sums are those recorded either way."""
+    probe = _probe(volume, per_frame=4)
+    probe.pin(0.6e-3, 2.5)
+    probe.outcomes = []
+    plan = probe.plan(CAM.shape, slope=0.0)
+    probe.record(plan, estimate=[0.0, 2.0, 0.0, 1.0], expected=[1.0, 1.0, 1.0, 1.0], p_pass=[0.1, 0.2, 0.3, 0.4])
+    assert probe.outcomes == [(0.6e-3, 2.5, False, 0.1), (0.6e-3, 2.5, True, 0.2),
+                              (0.6e-3, 2.5, False, 0.3), (0.6e-3, 2.5, True, 0.4)]
+    injected, counted, expected = probe.class_counts()
+    assert injected.sum() == 4 and counted.sum() == 2 and expected.sum() == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("background, e_r, a_mm, z_m, seconds", [
+    ("ramp:150:190", 250.0, 0.5, 2.5, 30.0),     # the bright sky, at its smallest counted sizes
+    ("uniform:40", 200.0, 0.25, 2.49, 20.0),     # the dark backdrop, at its smallest
+])
+def test_probe_counts_its_drops_as_the_gauge_counts_the_same_drops_in_the_video(background, e_r, a_mm, z_m,
+                                                                              seconds):
+    """The probe's correction is only as good as its drops are like the real ones: drops of
+    one size and depth rendered into a rain clip by the simulator, where the gauge counts a
+    fifth of them, are counted as often as the probe's own drops of that size and depth
+    (within four standard errors of the two binomial counts)."""
+    from raingauge.gauge.fidelity import probe_fidelity
+
+    cam = CAM.replace(noise_sigma_dn=3.0)
+    res = probe_fidelity(cam, radius_m=a_mm * 1e-3, depth_m=z_m, background=background, drop_brightness_dn=e_r,
+                         seconds=seconds, coverage=0.04)
+    (rh, rt), (ph, pt) = res["real"], res["probe"]
+    assert rt > 2000 and pt > 2000
+    real, prb = rh / rt, ph / pt
+    assert 0.1 < real < 0.4
+    sd = math.sqrt(real * (1 - real) / rt + prb * (1 - prb) / pt)
+    assert abs(real - prb) < 4.0 * sd

@@ -5,7 +5,8 @@ pieces are importable on their own: per-streak measurement
 (:mod:`~raingauge.gauge.streaks`), defocus rejection
 (:mod:`~raingauge.gauge.rejection`), sample volume
 (:mod:`~raingauge.gauge.volume`), its correction by artificial drops in the
-frames (:mod:`~raingauge.gauge.completeness`) and window products
+frames (:mod:`~raingauge.gauge.completeness`; checked against drops the simulator
+renders into the video by :mod:`~raingauge.gauge.fidelity`) and window products
 (:mod:`~raingauge.gauge.products`).
 """
 
