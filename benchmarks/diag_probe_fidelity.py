@@ -10,9 +10,12 @@ and prints, per (a, z):
 * the share of the extra drops the gauge counted (a counted drop within the streak's
   radius + 3 px across and a quarter of its length + 3 px along its centre),
 * the share of the probe's drops it counted, and
+* the rain the gauge credits each with on average, (2 a_m)^3 v_m / kappa(a_m) at its
+  measured size and speed (0 when not counted), the quantity the probe's ratio sums,
+  with its standard error, relative to the probe's (extra / probe), and
 * the model's pass probability p(a, z) averaged over the probe's drops.
 
-The two shares agree where the probe is faithful.  By default the gauge is given the
+The two agree where the probe is faithful.  By default the gauge is given the
 simulator's drop brightness E_r: its own estimate leans on the focus of the streaks it
 sees, and many sharp drops of one size move it.
 
@@ -31,6 +34,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_gauge_accuracy import BACKGROUNDS  # noqa: E402
 
 from raingauge.gauge.fidelity import probe_fidelity  # noqa: E402
+
+def _ratio(a, b) -> str:
+    """'r +- se' of two (mean, standard error) pairs, the errors in quadrature."""
+    (ma, sa), (mb, sb) = a, b
+    if not (mb > 0 and ma >= 0):
+        return f"{'n/a':>28s}"
+    r = ma / mb
+    se = r * ((sa / ma) ** 2 + (sb / mb) ** 2) ** 0.5 if ma > 0 else float("nan")
+    return f"{r:20.3f} +- {se:5.3f}"
+
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -58,7 +71,8 @@ def main(argv=None) -> int:
     prof = default_profile().replace(width_px=w, height_px=h, noise_sigma_dn=float(args.noise))
     print(f"{args.background}, {args.rate:g} mm/h {args.dsd}, noise {args.noise:g}, {args.seconds:g} s, "
           f"E_r {'estimated' if args.estimate_brightness else 'given'}")
-    print("  a [mm]  z [m]  r [px]  L [px]     extra counted        probe counted        model p   E_r")
+    print("  a [mm]  z [m]  r [px]  L [px]     extra counted        probe counted        "
+          "rain per drop, extra / probe   model p   E_r")
     for a_mm, z in points:
         spec, motion, e_r = BACKGROUNDS[args.background]
         res = probe_fidelity(prof, radius_m=1e-3 * a_mm, depth_m=z, background=spec, motion=motion,
@@ -68,7 +82,8 @@ def main(argv=None) -> int:
         (rh, rt), (ph, pt) = res["real"], res["probe"]
         print(f"  {a_mm:6.3f}  {z:5.3f}  {res['radius_px']:6.2f}  {res['length_px']:6.1f}   "
               f"{rh:6d}/{rt:6d} = {rh / max(rt, 1):5.3f}   {ph:5d}/{pt:5d} = {ph / max(pt, 1):5.3f}   "
-              f"{res['model_p']:7.3f}  {res['drop_brightness_dn']:5.1f}")
+              f"{_ratio(res['real_share'], res['probe_share'])}   {res['model_p']:7.3f}  "
+              f"{res['drop_brightness_dn']:5.1f}")
     return 0
 
 

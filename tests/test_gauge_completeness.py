@@ -680,14 +680,14 @@ def test_pinned_probe_injects_one_size_at_one_depth(volume):
 
 def test_outcomes_log_every_injection(volume):
     """With ``outcomes`` a list, each recorded drop leaves its radius, depth, whether it was
-    counted and the model's p; the sums are those recorded either way."""
+    counted, the model's p and the gauge's estimate; the sums are those recorded either way."""
     probe = _probe(volume, per_frame=4)
     probe.pin(0.6e-3, 2.5)
     probe.outcomes = []
     plan = probe.plan(CAM.shape, slope=0.0)
     probe.record(plan, estimate=[0.0, 2.0, 0.0, 1.0], expected=[1.0, 1.0, 1.0, 1.0], p_pass=[0.1, 0.2, 0.3, 0.4])
-    assert probe.outcomes == [(0.6e-3, 2.5, False, 0.1), (0.6e-3, 2.5, True, 0.2),
-                              (0.6e-3, 2.5, False, 0.3), (0.6e-3, 2.5, True, 0.4)]
+    assert probe.outcomes == [(0.6e-3, 2.5, False, 0.1, 0.0), (0.6e-3, 2.5, True, 0.2, 2.0),
+                              (0.6e-3, 2.5, False, 0.3, 0.0), (0.6e-3, 2.5, True, 0.4, 1.0)]
     injected, counted, expected = probe.class_counts()
     assert injected.sum() == 4 and counted.sum() == 2 and expected.sum() == pytest.approx(1.0)
 
@@ -701,7 +701,8 @@ def test_probe_counts_its_drops_as_the_gauge_counts_the_same_drops_in_the_video(
     """The probe's correction is only as good as its drops are like the real ones: drops of
     one size and depth rendered into a rain clip by the simulator, where the gauge counts a
     fifth of them, are counted as often as the probe's own drops of that size and depth
-    (within four standard errors of the two binomial counts)."""
+    (within four standard errors of the two binomial counts), and credited with as much
+    rain on average (within four standard errors of the two means)."""
     from raingauge.gauge.fidelity import probe_fidelity
 
     cam = CAM.replace(noise_sigma_dn=3.0)
@@ -713,3 +714,6 @@ def test_probe_counts_its_drops_as_the_gauge_counts_the_same_drops_in_the_video(
     assert 0.1 < real < 0.4
     sd = math.sqrt(real * (1 - real) / rt + prb * (1 - prb) / pt)
     assert abs(real - prb) < 4.0 * sd
+    (m_real, se_real), (m_prb, se_prb) = res["real_share"], res["probe_share"]
+    assert m_real > 0 and m_prb > 0
+    assert abs(m_real - m_prb) < 4.0 * math.hypot(se_real, se_prb)

@@ -199,8 +199,8 @@ class CompletenessProbe:
         self._next_class = 0
         self._cache = None
         self._pin = None
-        #: per recorded injection, when a list: (radius [m], depth [m], counted, model's p)
-        #: (:meth:`record`); None keeps none
+        #: per recorded injection, when a list: (radius [m], depth [m], counted, model's p,
+        #: the gauge's estimate (2 a_m)^3 v_m / kappa(a_m)) (:meth:`record`); None keeps none
         self.outcomes: list | None = None
 
     @property
@@ -609,7 +609,7 @@ class CompletenessProbe:
         self.injected += cls.size
         self.passed += int(np.count_nonzero(x > 0))
         if self.outcomes is not None:
-            self.outcomes.extend((p["radius_m"], p["depth_m"], bool(e > 0), float(q))
+            self.outcomes.extend((p["radius_m"], p["depth_m"], bool(e > 0), float(q), float(e))
                                  for p, e, q in zip(plan, np.asarray(estimate, dtype=float), np.asarray(p_pass, dtype=float)))
         # forget the oldest frames beyond the history or the memory
         while len(self._log) > 1:

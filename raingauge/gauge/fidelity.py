@@ -6,10 +6,11 @@ correction is only as good as those drops are like the real ones.  :func:`probe_
 renders, into a simulated rain clip, extra drops of one radius a at one depth z (in every
 frame, anywhere in it, composed over the frame's linear intensity before the sensor's
 noise and rounding, as the simulator composes its rain), pins the probe to the same a
-and z (:meth:`CompletenessProbe.pin`) and returns the shares of each the gauge counted.
-Where the probe is faithful the two agree (within the binomial scatter of the counts):
-both are the same chance, that the gauge counts a drop of that size at that depth in
-that scene.  The extra drops are part of the scene's rain, in frames n - 1 and n + 1
+and z (:meth:`CompletenessProbe.pin`) and returns the shares of each the gauge counted,
+and the rain it credits each with on average ((2 a_m)^3 v_m / kappa(a_m) at its measured
+size and speed, 0 when not counted: what the probe's ratio sums).  Where the probe is
+faithful the two agree within their scatter: both are the same chance, that the gauge
+counts a drop of that size at that depth in that scene, and the same measurement of it.  The extra drops are part of the scene's rain, in frames n - 1 and n + 1
 too, for the probe's drops as for one another: placed only in every second frame, they
 would hide the probe's drops (of frames between theirs) from the three-frame test and
 never one another.
@@ -70,14 +71,16 @@ def probe_fidelity(profile, *, radius_m: float, depth_m: float, background: str 
 
     Returns
     -------
-    dict: ``real`` (the extra drops) and ``probe``, each (counted, total); ``model_p`` the
+    dict: ``real`` (the extra drops) and ``probe``, each (counted, total); ``real_share``
+    and ``probe_share``, each (mean, standard error) of the rain credited per drop
+    [m^4/s / (m^3/px^2)]; ``model_p`` the
     model's pass probability averaged over the probe's drops; ``drop_brightness_dn`` the
     gauge's E_r; ``radius_px`` and ``length_px`` of the streak.  An extra drop is counted when a
     counted drop of its frame lies within the streak's radius + 3 px across and a quarter
     of its length + 3 px along from its centre.
     """
     from raingauge.gauge.gauge import RainGauge
-    from raingauge.gauge.volume import _pitch
+    from raingauge.gauge.volume import _pitch, whole_streak_area_px2
     from raingauge.physics.camera import blur_circle_px
     from raingauge.physics.drops import fall_velocity
     from raingauge.render.simulator import compose_rain, render_streaks, simulate
@@ -121,16 +124,36 @@ def probe_fidelity(profile, *, radius_m: float, depth_m: float, background: str 
     g.flush()
     found = {}
     for d in g.drops:
-        found.setdefault(int(round(d["t"] * fps)), []).append((d["x"], d["y"]))
+        # the drop's share of the rate as the probe credits it, (2 a_m)^3 v_m / kappa(a_m):
+        # its weight is 1 / (kappa c A_R / Delta) (c the probe's correction, A_R / Delta the
+        # whole-streak area per frame period)
+        area = float(whole_streak_area_px2(np.array([d["ux"] * profile.exposure_s, d["motion_px"]]),
+                                           d["apparent_width_px"], profile.shape)) / g._frame_interval
+        share = d["diameter_m"] ** 3 * d["velocity_m_s"] * d["weight_s_m3"] * d["probe_correction"] * area
+        found.setdefault(int(round(d["t"] * fps)), []).append((d["x"], d["y"], share))
     hits = total = 0
+    real_shares = []
     for k, c in placed.items():
         total += len(c)
-        got = np.array(found.get(k, []), dtype=float).reshape(-1, 2)
+        got = np.array(found.get(k, []), dtype=float).reshape(-1, 3)
+        shares = np.zeros(len(c))
         if got.size:
             near = ((np.abs(got[None, :, 0] - c[:, None, 0]) <= r + 3.0)
                     & (np.abs(got[None, :, 1] - c[:, None, 1]) <= 0.25 * length + 3.0))
             hits += int(near.any(axis=1).sum())
-    out = np.array([(counted, p) for _a, _z, counted, p in g.probe.outcomes], dtype=float).reshape(-1, 2)
+            shares = (near * got[None, :, 2]).sum(axis=1)
+        real_shares.append(shares)
+    real_shares = np.concatenate(real_shares) if real_shares else np.zeros(0)
+    out = np.array([(counted, p, e) for _a, _z, counted, p, e in g.probe.outcomes], dtype=float).reshape(-1, 3)
     return {"real": (hits, total), "probe": (int(out[:, 0].sum()), len(out)),
+            "real_share": _mean_se(real_shares), "probe_share": _mean_se(out[:, 2]),
             "model_p": float(out[:, 1].mean()) if len(out) else math.nan,
             "drop_brightness_dn": float(g.drop_brightness_estimate_dn), "radius_px": r, "length_px": length}
+
+
+def _mean_se(x) -> tuple[float, float]:
+    """Mean and its standard error [same units]."""
+    x = np.asarray(x, dtype=float)
+    if x.size < 2:
+        return math.nan, math.nan
+    return float(x.mean()), float(x.std(ddof=1) / math.sqrt(x.size))
