@@ -875,6 +875,34 @@ def test_completion_continues_the_exponential_spectrum():
     assert comp["rate_mm_h"] > 0.05 * counted
     # too few drops to fix the slope
     assert g._completion(_bright_frames(), drops[:60], duration) is None
+    assert comp["extrapolated_rate_mm_h"] == comp["rate_mm_h"]
+
+
+def test_completion_is_clipped_not_dropped():
+    """A completion that would add more than COMPLETION_MAX_ADDED of the counted rain adds
+    just that much (its spectrum scaled down; the whole extrapolation is kept for the
+    interval): the rate does not jump from the completed one to the counted one alone when
+    the fit moves a little across the limit."""
+    from raingauge.gauge import gauge as G
+    from raingauge.physics.drops import fall_velocity
+
+    cam = CAM.replace(noise_sigma_dn=3.0)
+    rng = np.random.default_rng(7)
+    lam, d0, n, duration = 2.5e3, 0.6e-3, 6000, 10.0
+    d = d0 + rng.exponential(1.0 / lam, n)
+    drops = [{"diameter_m": float(x), "velocity_m_s": float(fall_velocity(x)), "weight_s_m3": 1.0} for x in d]
+    counted = 3.6e6 * math.pi / 6 * sum(x["diameter_m"] ** 3 * x["velocity_m_s"] for x in drops) / duration
+    full = RainGauge(cam, drop_brightness_dn=250.0)._completion(_bright_frames(), drops, duration)
+    share = full["rate_mm_h"] / counted
+    assert share > 0.05
+    for limit in (0.5 * share, 0.99 * share, 1.01 * share, 2.0 * share):
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(G, "COMPLETION_MAX_ADDED", limit)
+            comp = RainGauge(cam, drop_brightness_dn=250.0)._completion(_bright_frames(), drops, duration)
+        assert comp["extrapolated_rate_mm_h"] == pytest.approx(full["rate_mm_h"])
+        assert comp["rate_mm_h"] == pytest.approx(min(limit, share) * counted)
+        added = 3.6e6 * math.pi / 6 * np.sum(comp["diameter_m"] ** 3 * comp["velocity_m_s"] * comp["weight_s_m3"])
+        assert added / duration == pytest.approx(comp["rate_mm_h"])
 
 
 def test_completed_rain_is_in_the_rate_the_dsd_and_the_accumulation():

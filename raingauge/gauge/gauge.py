@@ -170,8 +170,11 @@ FLAG_SHARES = (("overexposed", 0.1), ("underexposed", 0.5), ("scene_motion", 0.2
 
 #: Completion of the spectrum below the smallest counted size (:meth:`RainGauge._completion`):
 #: drops needed above the fitted size [-], the share of its sample volume over the nominal
-#: dark background a size keeps to be fitted [-], and the largest rain the completion may add, relative to the counted
-#: rain [-] (more would rest on the extrapolation rather than on the drops).
+#: dark background a size keeps to be fitted [-], and the largest rain the completion adds,
+#: relative to the counted rain [-]: more would rest on the extrapolation rather than on
+#: the drops, and is clipped to it (the interval's upper end keeps the whole
+#: extrapolation).  Left out instead, the rate fell from 1.00 to 0.68 of the truth on one
+#: minute of 2 mm/h against a bright sky when the drop brightness moved by 0.3 %.
 COMPLETION_MIN_DROPS = 100
 #: ... completed only where the smallest counted diameter exceeds the smallest measurable
 #: one by this factor (over a dark background at 1 gray level of noise it lies 10 % above it,
@@ -1834,8 +1837,10 @@ class RainGauge:
                                              systematic_rel=systematic)
             if completion is not None:
                 # the completed rain rests on the spectrum's shape: the interval runs from the
-                # counted rain's lower limit to the completed rain's upper one
-                hi *= prod["rain_rate_mm_h"] / max(float(per_drop.sum()), 1e-300)
+                # counted rain's lower limit to the upper one of the counted rain with the
+                # whole extrapolation (also where the completion was clipped)
+                full = prod["rain_rate_mm_h"] + completion["extrapolated_rate_mm_h"] - completion["rate_mm_h"]
+                hi *= full / max(float(per_drop.sum()), 1e-300)
             prod["rain_rate_ci95_mm_h"] = [lo, hi]
             prod["drops_counted"] = int(np.count_nonzero(per_drop > 0))
         rate = prod["rain_rate_mm_h"]
@@ -1927,11 +1932,16 @@ class RainGauge:
         about a third more than the missing rain (12.5 % of the rain below 0.75 mm at
         2 mm/h, completed as 17 %).
 
+        The completion adds at most :data:`COMPLETION_MAX_ADDED` of the counted rain (the
+        spectrum's density scaled down to it); ``extrapolated_rate_mm_h`` is what the
+        continued spectrum holds in full.
+
         Returns
         -------
         None, or a dict: ``diameter_m, velocity_m_s, weight_s_m3`` arrays of the completed
         sizes as entries of the window (``weight_s_m3`` = density x duration), their
-        ``rate_mm_h``, the fitted ``lambda_per_mm`` and the smallest counted ``d_cut_m``.
+        ``rate_mm_h`` (as added), ``extrapolated_rate_mm_h``, the fitted ``lambda_per_mm``
+        and the smallest counted ``d_cut_m``.
         """
         from raingauge.physics.drops import fall_velocity
 
@@ -1978,9 +1988,13 @@ class RainGauge:
         rate = float(3.6e6 * math.pi / 6.0 * np.sum(dc ** 3 * v * dens))
         counted_rate = float(3.6e6 * math.pi / 6.0 * np.sum(
             np.array([x["diameter_m"] ** 3 * x["velocity_m_s"] for x in drops]) * rho))
-        if not (rate > 0 and rate <= COMPLETION_MAX_ADDED * counted_rate):
+        if not (rate > 0 and counted_rate > 0):
             return None
-        return {"diameter_m": dc, "velocity_m_s": v, "weight_s_m3": dens * duration, "rate_mm_h": rate,
+        # more than COMPLETION_MAX_ADDED of the counted rain is clipped to it (a step from
+        # all of it to none would make the rate jump with the smallest change of the fit)
+        scale = min(1.0, COMPLETION_MAX_ADDED * counted_rate / rate)
+        return {"diameter_m": dc, "velocity_m_s": v, "weight_s_m3": dens * duration * scale,
+                "rate_mm_h": rate * scale, "extrapolated_rate_mm_h": rate,
                 "lambda_per_mm": 1e-3 * lam, "d_cut_m": d_cut}
 
     def _decide_arrays(self, cands: list, radii: np.ndarray, e_r: float, wind: float):
