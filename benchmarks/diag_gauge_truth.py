@@ -49,6 +49,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from _clip_args import add_clip_arguments, frame_size  # noqa: E402
 from bench_gauge_accuracy import BACKGROUNDS  # noqa: E402
 
 #: Bands of true diameter [mm].
@@ -212,22 +213,12 @@ def run(rate, background, noise, wind, seconds, seed, size, *, given_brightness=
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--rate", type=float, default=10.0, help="rain rate [mm/h]")
-    ap.add_argument("--dsd", choices=("marshall_palmer", "gamma3"), default="marshall_palmer",
-                    help="drop size distribution: Marshall-Palmer, or gamma with mu = 3")
-    ap.add_argument("--background", choices=sorted(BACKGROUNDS), default="bright_sky")
-    ap.add_argument("--noise", type=float, default=3.0, help="sensor noise [gray levels]")
+    add_clip_arguments(ap, rate=10.0, dsd="marshall_palmer", seconds=60.0, seed=7)
     ap.add_argument("--wind", type=float, default=0.0, help="wind [m/s]")
-    ap.add_argument("--seconds", type=float, default=60.0)
-    ap.add_argument("--seed", type=int, default=7)
-    ap.add_argument("--size", default="1280x720", help="frame size WxH [px]")
     ap.add_argument("--given-brightness", action="store_true",
                     help="give the gauge the simulator's drop brightness E_r instead of its estimate")
     args = ap.parse_args(argv)
-    try:
-        w, h = (int(s) for s in args.size.lower().split("x"))
-    except ValueError:
-        ap.error(f"--size must be WxH, e.g. 1280x720, got {args.size!r}")
+    w, h = frame_size(ap, args.size)
     run(args.rate, args.background, args.noise, args.wind, args.seconds, args.seed, (w, h),
         given_brightness=args.given_brightness, dsd=args.dsd)
     return 0

@@ -31,6 +31,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from _clip_args import add_clip_arguments, frame_size  # noqa: E402
 from bench_gauge_accuracy import BACKGROUNDS  # noqa: E402
 
 from raingauge.gauge.fidelity import probe_fidelity  # noqa: E402
@@ -47,27 +48,21 @@ def _ratio(a, b) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--background", choices=sorted(BACKGROUNDS), default="bright_sky")
+    add_clip_arguments(ap, rate=2.0, dsd="gamma3", seconds=30.0, seed=12)
     ap.add_argument("--points", default="0.45:2.48,0.5:2.5,0.55:2.53",
                     help="drops as RADIUS_MM:DEPTH_M, comma-separated")
-    ap.add_argument("--rate", type=float, default=2.0, help="rain rate of the clip [mm/h]")
-    ap.add_argument("--dsd", choices=("marshall_palmer", "gamma3"), default="gamma3")
-    ap.add_argument("--noise", type=float, default=3.0, help="sensor noise [gray levels]")
-    ap.add_argument("--seconds", type=float, default=30.0)
-    ap.add_argument("--seed", type=int, default=12)
-    ap.add_argument("--size", default="1280x720", help="frame size WxH [px]")
     ap.add_argument("--estimate-brightness", action="store_true",
                     help="let the gauge estimate E_r (the extra drops move the estimate)")
     args = ap.parse_args(argv)
     from raingauge.profile import default_profile
 
+    w, h = frame_size(ap, args.size)
     try:
-        w, h = (int(s) for s in args.size.lower().split("x"))
         points = [tuple(float(x) for x in p.split(":")) for p in args.points.split(",")]
         if any(len(p) != 2 for p in points):
             raise ValueError
     except ValueError:
-        ap.error("--size must be WxH and --points RADIUS_MM:DEPTH_M,..., e.g. --points 0.5:2.5")
+        ap.error(f"--points must be RADIUS_MM:DEPTH_M,..., e.g. --points 0.5:2.5, got {args.points!r}")
     prof = default_profile().replace(width_px=w, height_px=h, noise_sigma_dn=float(args.noise))
     print(f"{args.background}, {args.rate:g} mm/h {args.dsd}, noise {args.noise:g}, {args.seconds:g} s, "
           f"E_r {'estimated' if args.estimate_brightness else 'given'}")
