@@ -717,31 +717,3 @@ def test_probe_counts_its_drops_as_the_gauge_counts_the_same_drops_in_the_video(
     (m_real, se_real), (m_prb, se_prb) = res["real_share"], res["probe_share"]
     assert m_real > 0 and m_prb > 0
     assert abs(m_real - m_prb) < 4.0 * math.hypot(se_real, se_prb)
-
-
-def test_injections_drawn_at_a_stale_drop_brightness_are_forgotten(volume):
-    """The gauge's drop brightness E_r settles over the first tens of seconds; the probe keeps
-    only the injections drawn at an E_r within BRIGHTNESS_TOLERANCE of the contrast of the
-    current one (a brighter drop is found more often), and its sums are those of the kept."""
-    from raingauge.gauge.completeness import BRIGHTNESS_TOLERANCE
-
-    probe = _probe(volume, per_frame=4)
-    probe.pin(0.6e-3, 2.5)
-    contrast = 100.0
-    tol = BRIGHTNESS_TOLERANCE * contrast
-
-    def rec(e_r, counted=(0.0, 1.0, 0.0, 1.0)):
-        probe.record(probe.plan(CAM.shape, slope=0.0), estimate=list(counted), expected=[1.0] * 4,
-                     p_pass=[0.5] * 4, drop_brightness_dn=e_r, contrast_dn=contrast)
-
-    for _ in range(3):
-        rec(200.0)
-    rec(200.0 + 0.9 * tol)                       # within the tolerance: all kept
-    assert probe.class_counts()[0].sum() == 16
-    rec(200.0 + 1.8 * tol, counted=(1.0,) * 4)   # the first three frames are off by more now
-    injected, counted, expected = probe.class_counts()
-    assert injected.sum() == 8 and counted.sum() == 6 and expected.sum() == pytest.approx(4.0)
-    # without the brightness (a frame too dim for the contrast) nothing is forgotten
-    probe.record(probe.plan(CAM.shape, slope=0.0), estimate=[0.0] * 4, expected=[1.0] * 4, p_pass=[0.5] * 4,
-                 drop_brightness_dn=300.0, contrast_dn=None)
-    assert probe.class_counts()[0].sum() == 12

@@ -62,9 +62,7 @@ streak's change of 0.6 gray levels becomes 1 at every pixel along it and is foun
 often than a real streak of that change).
 
 The correction is a ratio of sums over the injections of about the last window
-(``memory_s``) drawn at about the current drop brightness (:data:`BRIGHTNESS_TOLERANCE`:
-the gauge's estimate of E_r settles over the first tens of seconds, and drops drawn
-brighter are found more often), and its sampling error adds to the rate's; the gauge reweights a window's
+(``memory_s``), and its sampling error adds to the rate's; the gauge reweights a window's
 drops with the latest correction when it reports, and :meth:`CompletenessProbe.adapt`
 probes more often (every ``fastest`` frames at most) while that error exceeds half the
 rest of the rate's error, less often (every ``every`` frames) once it does not.  Against a
