@@ -131,10 +131,6 @@ PROBE_SD_SHARE = 0.5
 #: Bounds of the correction factor [-].
 CORRECTION_RANGE = (0.1, 10.0)
 
-#: Injections drawn at a drop brightness E_r further than this share of the drop contrast
-#: E_r - E_b from the current E_r are forgotten (:meth:`CompletenessProbe.record`) [-].
-BRIGHTNESS_TOLERANCE = 0.08
-
 
 class CompletenessProbe:
     """Artificial drops injected into the gauge's frames: the factor c(a) by which the gauge
@@ -576,8 +572,7 @@ class CompletenessProbe:
             self.interval = int(_clip(np.floor(k), min(self.fastest, self.every), self.every))
         return self.interval
 
-    def record(self, plan: list[dict], estimate, expected, p_pass, t_s: float | None = None, *,
-               drop_brightness_dn: float | None = None, contrast_dn: float | None = None) -> None:
+    def record(self, plan: list[dict], estimate, expected, p_pass, t_s: float | None = None) -> None:
         """Log the outcome of a frame's injections.
 
         Parameters
@@ -594,13 +589,6 @@ class CompletenessProbe:
             Per drop, the model's p(a, z, C, sigma) alone, so averaged [-].
         t_s : float, optional
             The frame's time [s] (for ``memory_s``).
-        drop_brightness_dn, contrast_dn : float, optional
-            The drop brightness E_r the drops were drawn at and the drop contrast E_r - E_b
-            of the frame [gray levels].  The gauge's estimate of E_r settles over the first
-            tens of seconds (on the moving scene at 2 mm/h from 241 gray levels to 200
-            over 40 s): the injections drawn at an E_r off the current one by more than
-            :data:`BRIGHTNESS_TOLERANCE` of the contrast are forgotten, since a brighter
-            drop is found more often and would have the gauge read less rain.
         """
         if not plan:
             return
@@ -612,19 +600,12 @@ class CompletenessProbe:
         y = dv * np.asarray(expected, dtype=float)
         cols = (np.ones(cls.size), (x > 0).astype(float), x, y, np.asarray(p_pass, dtype=float), x * x, y * y, x * y)
         sums = np.stack([np.bincount(cls, c, minlength=n_cls) for c in cols], axis=1)
-        e_r = math.nan if drop_brightness_dn is None else float(drop_brightness_dn)
-        if (np.isfinite(e_r) and contrast_dn is not None and contrast_dn > 0
-                and any(abs(e - e_r) > BRIGHTNESS_TOLERANCE * contrast_dn for _t, _s, e in self._log)):
-            kept = [entry for entry in self._log if not abs(entry[2] - e_r) > BRIGHTNESS_TOLERANCE * contrast_dn]
-            self._log = deque(kept)
-            self._total = (np.sum([entry[1] for entry in kept], axis=0) if kept
-                           else np.zeros_like(self._total))
-        self._log.append((t_s, sums, e_r))
+        self._log.append((t_s, sums))
         self._total += sums
         self._n_records += 1
         if self._n_records % 1024 == 0:
             # the running sums lose the rounding of what left them: start them afresh
-            self._total = np.sum([entry[1] for entry in self._log], axis=0)
+            self._total = np.sum([e[1] for e in self._log], axis=0)
         self.injected += cls.size
         self.passed += int(np.count_nonzero(x > 0))
         if self.outcomes is not None:
@@ -632,7 +613,7 @@ class CompletenessProbe:
                                  for p, e, q in zip(plan, np.asarray(estimate, dtype=float), np.asarray(p_pass, dtype=float)))
         # forget the oldest frames beyond the history or the memory
         while len(self._log) > 1:
-            t0, old, _e = self._log[0]
+            t0, old = self._log[0]
             too_many = self._total[:, 0].sum() - old[:, 0].sum() >= self.history
             too_old = (self.memory_s is not None and t_s is not None and t0 is not None
                        and t0 < t_s - self.memory_s)

@@ -1172,8 +1172,7 @@ class RainGauge:
                     estimate[j] = s_blob
         if focus_q:
             self._probe_focus.extend(focus_q, focus_w)
-        probe.record(plan, estimate, expected, p_pass, t_s=t, drop_brightness_dn=e_inj,
-                     contrast_dn=None if ref_bg is None else e_inj - ref_bg)
+        probe.record(plan, estimate, expected, p_pass, t_s=t)
 
     def _resolve_pending(self) -> None:
         """Decide the frames kept back until the drop brightness E_r was known well enough."""
