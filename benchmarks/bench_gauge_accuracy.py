@@ -86,15 +86,35 @@ def heavy_stretch_start(pf, minutes: float = 30.0):
 
 
 def true_dm_mm(truth) -> float:
-    d = np.asarray(truth["windows"][0]["dsd_d_mm"])
-    m3 = np.zeros_like(d)
-    m4 = np.zeros_like(d)
-    for w in truth["windows"]:
-        n = np.asarray(w["dsd_n_m3_mm"])
-        m3 += d ** 3 * n
-        m4 += d ** 4 * n
-    # the camera cannot size drops below ~0.36 mm; Dm is dominated by large ones anyway
-    return float(m4.sum() / m3.sum()) if m3.sum() > 0 else float("nan")
+    """Dm of the drops the clip rendered [mm]: each window's Dm of its drops' own diameters,
+    weighted by its liquid water (the third moment); NaN without drops."""
+    dm = np.array([w["dm_mm"] if w["dm_mm"] is not None else np.nan for w in truth["windows"]], dtype=float)
+    m3 = np.array([w["lwc_g_m3"] for w in truth["windows"]], dtype=float)
+    ok = np.isfinite(dm) & (m3 > 0)
+    return float(np.sum(dm[ok] * m3[ok]) / np.sum(m3[ok])) if ok.any() else float("nan")
+
+
+def parsivel_dm_mm(pf, truth) -> float:
+    """Dm of the Parsivel records a clip replayed, as the simulator draws them [mm]: each
+    record's N(D) constant across its diameter class (not at the class centre: the classes
+    widen to 0.5 and 1 mm above 2.5 mm), over the diameters the velocity law covers, and
+    the records pooled.  NaN without such records."""
+    from raingauge.disdrometer import record_density_m4
+    from raingauge.physics import drops as D
+
+    rain = truth.get("rain") or {}
+    if rain.get("source") != "parsivel":
+        return float("nan")
+    wanted = set(rain["records"])
+    lo_mm, hi_mm = rain.get("diameter_range_mm", (0.0, math.inf))
+    edges = np.clip(np.asarray(D.PARSIVEL_D_EDGES_MM, dtype=float), lo_mm, hi_mm)
+    m3 = m4 = 0.0
+    for r in pf.records:
+        if r.time.isoformat() in wanted:
+            n = np.nan_to_num(record_density_m4(r.counts))
+            m3 += float(np.sum(n * (edges[1:] ** 4 - edges[:-1] ** 4) / 4.0))
+            m4 += float(np.sum(n * (edges[1:] ** 5 - edges[:-1] ** 5) / 5.0))
+    return m4 / m3 if m3 > 0 else float("nan")
 
 
 def nominal_dm_mm(rate: float, dsd: str) -> float:
@@ -165,7 +185,7 @@ def _clip_row(job):
     lo = 0.0 if lo is None else lo
     hi = float("inf") if hi is None else hi
     cov = lo <= true <= hi
-    dm_t = nominal_dm_mm(rate, dsd)
+    dm_t = nominal_dm_mm(rate, dsd) if dsd != "parsivel" else parsivel_dm_mm(pf, truth)
     if not np.isfinite(dm_t):
         dm_t = true_dm_mm(truth)
     dm_m = rec["dm_mm"] if rec["dm_mm"] is not None else float("nan")

@@ -32,6 +32,7 @@ them between clips and with the probe's, not with 1.
     python benchmarks/diag_gauge_truth.py --rate 10 --background bright_sky --noise 3
     python benchmarks/diag_gauge_truth.py --rate 30 --wind 3 --seconds 60
     python benchmarks/diag_gauge_truth.py --rate 10 --dsd gamma3
+    python benchmarks/diag_gauge_truth.py --rate 30 --background dark_uniform --noise 1 --dsd parsivel
     python benchmarks/diag_gauge_truth.py --rate 100 --background dark_uniform --noise 1 --given-brightness
 
 The first line gives the drop brightness E_r the gauge estimated beside the simulator's;
@@ -49,7 +50,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _clip_args import add_clip_arguments, frame_size  # noqa: E402
+from _clip_args import add_clip_arguments, dsd_keywords, frame_size  # noqa: E402
 from bench_gauge_accuracy import BACKGROUNDS  # noqa: E402
 
 #: Bands of true diameter [mm].
@@ -99,7 +100,7 @@ def match(truth, x, y):
     return j if u[j] <= 1.0 else -1
 
 
-def run(rate, background, noise, wind, seconds, seed, size, *, given_brightness=False, dsd="marshall_palmer"):
+def run(rate, background, noise, wind, seconds, seed, size, *, given_brightness=False, dsd_kw=None):
     from raingauge.gauge import RainGauge
     from raingauge.gauge.completeness import CLASS_EDGES_M
     from raingauge.gauge.gauge import KAPPA_FLOOR_REL
@@ -111,10 +112,10 @@ def run(rate, background, noise, wind, seconds, seed, size, *, given_brightness=
     w, h = size
     prof = default_profile().replace(width_px=w, height_px=h, noise_sigma_dn=float(noise))
     spec, motion, e_r = BACKGROUNDS[background]
-    # the drop size distribution, as the accuracy benchmark draws it
-    dsd_kw = {"dsd": "gamma", "dsd_params": {"mu": 3.0}} if dsd == "gamma3" else {}
+    # the drop size distribution, as the accuracy benchmark draws it (default Marshall-Palmer)
+    dsd_kw = {"rain_rate_mm_h": rate} if dsd_kw is None else dsd_kw
     sim = simulate(prof, seconds=seconds, seed=seed, background=spec, motion=motion, wind_m_s=wind,
-                   drop_brightness_dn=e_r, truth_drops=True, rain_rate_mm_h=rate, **dsd_kw)
+                   drop_brightness_dn=e_r, truth_drops=True, **dsd_kw)
     # given the simulator's drop brightness, the gauge does not estimate it from its streaks
     g = RainGauge(prof, window_s=seconds, step_s=seconds, keep_drops=True,
                   drop_brightness_dn=e_r if given_brightness else None)
@@ -220,7 +221,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     w, h = frame_size(ap, args.size)
     run(args.rate, args.background, args.noise, args.wind, args.seconds, args.seed, (w, h),
-        given_brightness=args.given_brightness, dsd=args.dsd)
+        given_brightness=args.given_brightness, dsd_kw=dsd_keywords(ap, args.dsd, args.rate, args.seconds))
     return 0
 
 

@@ -48,7 +48,7 @@ def _ratio(a, b) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_clip_arguments(ap, rate=2.0, dsd="gamma3", seconds=30.0, seed=12)
+    add_clip_arguments(ap, rate=2.0, dsd="gamma3", seconds=30.0, seed=12, dsds=("marshall_palmer", "gamma3"))
     ap.add_argument("--points", default="0.45:2.48,0.5:2.5,0.55:2.53",
                     help="drops as RADIUS_MM:DEPTH_M, comma-separated")
     ap.add_argument("--estimate-brightness", action="store_true",
