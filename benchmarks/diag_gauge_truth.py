@@ -22,7 +22,10 @@ the script prints
   gauge estimated), beside the same ratio for the probe's injected drops
   (:meth:`raingauge.gauge.completeness.CompletenessProbe.class_counts`).  Where the
   two differ, the probe does not see what loses the real drops, and its correction
-  misses it;
+  misses it.  The last columns take the probe's ratio bin by bin (4 bins of radius
+  within the class, 4 of place within the depth span) weighted as the clip's own drops
+  fall in them: where the difference stays, it is not the mix of sizes and depths
+  within the class;
 * the rain of counted drops no drop of the clip explains (false detections).
 
 The count ratios carry the matching's own losses (a drop whose streak is cut by the
@@ -119,6 +122,8 @@ def run(rate, background, noise, wind, seconds, seed, size, *, given_brightness=
     # given the simulator's drop brightness, the gauge does not estimate it from its streaks
     g = RainGauge(prof, window_s=seconds, step_s=seconds, keep_drops=True,
                   drop_brightness_dn=e_r if given_brightness else None)
+    if g.probe is not None:
+        g.probe.outcomes = []
     fps = prof.frame_rate_hz
     truth = {}
     recs = []
@@ -189,27 +194,78 @@ def run(rate, background, noise, wind, seconds, seed, size, *, given_brightness=
     n_cls = CLASS_EDGES_M.size - 1
     counted = np.zeros(n_cls)
     expected = np.zeros(n_cls)
+    real = []            # per live drop: class, radius, place in its depth span, p, counted
     for k, t in truth.items():
         near, far = vol.depth_span(t["a"])
         live = t["whole"] & (t["a"] >= CLASS_EDGES_M[0]) & (t["z"] >= near) & (t["z"] <= far)
         live &= vol.kappa(t["a"], weights=weights, noise_dn=noise_dn, wind_m_s=wind) >= floor
         for j in np.flatnonzero(live):
             c = min(int(np.searchsorted(CLASS_EDGES_M, t["a"][j], side="right")) - 1, n_cls - 1)
-            expected[c] += vol.pass_probability_over(t["a"][j], t["z"][j], weights, noise_dn, wind_m_s=wind) \
+            p = vol.pass_probability_over(t["a"][j], t["z"][j], weights, noise_dn, wind_m_s=wind) \
                 if weights is not None else 0.0
+            expected[c] += p
             counted[c] += (k, j) in found
+            real.append((c, t["a"][j], (t["z"][j] - near[j]) / max(far[j] - near[j], 1e-12), p,
+                         (k, j) in found))
     if g.probe is not None:
         injected, p_counted, p_expected = g.probe.class_counts()
     else:
         injected = p_counted = p_expected = np.zeros(n_cls)
-    print("\n class  a [mm]      real counted/expected         probe counted/expected       real/probe")
+    mixed = _probe_at_real_mix(g, vol, np.array(real, dtype=float).reshape(-1, 5), n_cls)
+    print("\n class  a [mm]      real counted/expected         probe counted/expected       real/probe"
+          "   probe at the real drops' mix   real/that")
     for c in range(n_cls):
         # (a ratio on less than one expected drop says nothing)
-        real = counted[c] / expected[c] if expected[c] >= 1.0 else math.nan
+        r_c = counted[c] / expected[c] if expected[c] >= 1.0 else math.nan
         prb = p_counted[c] / p_expected[c] if p_expected[c] >= 1.0 else math.nan
         print(f"   {c}   {CLASS_EDGES_M[c] * 1e3:4.2f}-{CLASS_EDGES_M[c + 1] * 1e3:4.2f}  "
-              f"{int(counted[c]):6d} / {expected[c]:8.1f} = {real:5.2f}     "
-              f"{int(p_counted[c]):5d} / {p_expected[c]:7.1f} = {prb:5.2f}        {real / prb:5.2f}")
+              f"{int(counted[c]):6d} / {expected[c]:8.1f} = {r_c:5.2f}     "
+              f"{int(p_counted[c]):5d} / {p_expected[c]:7.1f} = {prb:5.2f}        {r_c / prb:5.2f}"
+              f"   {mixed[c]:28.2f}   {r_c / mixed[c]:9.2f}")
+
+
+#: Sub-bins of a probe class (in log a) and of the depth span, for :func:`_probe_at_real_mix`.
+MIX_BINS = (4, 4)
+
+
+def _probe_at_real_mix(g, vol, real, n_cls):
+    """Per radius class, the probe's counted / expected taken bin by bin (radius within the
+    class, place within the depth span) and averaged with the real drops' expected counts
+    as weights: what the probe would say of drops mixed as the clip's are.  Equal to the
+    real drops' ratio when the departure from the model depends only on (a, z)."""
+    from raingauge.gauge.completeness import CLASS_EDGES_M
+
+    out = np.full(n_cls, np.nan)
+    if g.probe is None or not g.probe.outcomes or real.size == 0:
+        return out
+    pr = np.array(g.probe.outcomes, dtype=float)
+    a_p, z_p, hit_p, p_p = pr[:, 0], pr[:, 1], pr[:, 2], pr[:, 3]
+    near, far = (np.asarray(x, dtype=float) for x in vol.depth_span(a_p))
+    u_p = (z_p - near) / np.maximum(far - near, 1e-12)
+    cls_p = np.clip(np.searchsorted(CLASS_EDGES_M, a_p, side="right") - 1, 0, n_cls - 1)
+    na, nu = MIX_BINS
+    for c in range(n_cls):
+        lo, hi = np.log(CLASS_EDGES_M[c]), np.log(CLASS_EDGES_M[c + 1])
+
+        def bins(a, u):
+            ia = np.clip(((np.log(a) - lo) / (hi - lo) * na).astype(int), 0, na - 1)
+            iu = np.clip((u * nu).astype(int), 0, nu - 1)
+            return ia * nu + iu
+
+        rs = real[real[:, 0] == c]
+        ps = cls_p == c
+        if rs.size == 0 or not ps.any() or rs[:, 3].sum() < 1.0:
+            continue
+        b_r = bins(rs[:, 1], rs[:, 2])
+        b_p = bins(a_p[ps], u_p[ps])
+        w = np.bincount(b_r, rs[:, 3], minlength=na * nu)
+        cnt = np.bincount(b_p, hit_p[ps], minlength=na * nu)
+        exp_ = np.bincount(b_p, p_p[ps], minlength=na * nu)
+        ok = exp_ > 0
+        if not np.any(w[ok] > 0):
+            continue
+        out[c] = float(np.sum(w[ok] * cnt[ok] / exp_[ok]) / np.sum(w[ok]))
+    return out
 
 
 def main(argv=None) -> int:

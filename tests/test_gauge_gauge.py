@@ -873,8 +873,11 @@ def test_completion_continues_the_exponential_spectrum():
     little = RainGauge(cam, drop_brightness_dn=250.0)._completion(dark, drops, duration)
     assert little is None or little["rate_mm_h"] < 0.01 * counted
     assert comp["rate_mm_h"] > 0.05 * counted
-    # too few drops to fix the slope
-    assert g._completion(_bright_frames(), drops[:60], duration) is None
+    # too few drops to fix the slope; enough (a quarter of them above the fitted size)
+    from raingauge.gauge.gauge import COMPLETION_MIN_DROPS
+
+    assert g._completion(_bright_frames(), drops[:COMPLETION_MIN_DROPS - 1], duration) is None
+    assert g._completion(_bright_frames(), drops[:8 * COMPLETION_MIN_DROPS], duration) is not None
     assert comp["extrapolated_rate_mm_h"] == comp["rate_mm_h"]
 
 
