@@ -101,17 +101,20 @@ def truncated_gamma_fit(diameter_m, weight, d_fit_m: float, *, prior_sd: float |
         z = f.sum(axis=1)
         return (f * x).sum(axis=1) / z, np.log(z) + top[:, 0]
 
-    # Lambda by bisection in log: E[D - D_f] falls as Lambda grows
-    lo = np.full(mus.size, math.log(1e-3 / m1))
-    hi = np.full(mus.size, math.log(1e3 / m1 + 1e4))
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        mean, _ = moments(mus, np.exp(mid))
-        high = mean > m1
-        lo = np.where(high, mid, lo)
-        hi = np.where(high, hi, mid)
-    lam = np.exp(0.5 * (lo + hi))
-    _, log_z = moments(mus, lam)
+    def fit_lambda(mu):
+        """(Lambda, log Z) at each shape of ``mu``: bisection in log Lambda, as the mean
+        excess E[D - D_f] falls while Lambda grows."""
+        lo = np.full(mu.size, math.log(1e-3 / m1))
+        hi = np.full(mu.size, math.log(1e3 / m1 + 1e4))
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            high = moments(mu, np.exp(mid))[0] > m1
+            lo = np.where(high, mid, lo)
+            hi = np.where(high, hi, mid)
+        lam = np.exp(0.5 * (lo + hi))
+        return lam, moments(mu, lam)[1]
+
+    lam, log_z = fit_lambda(mus)
     ll = n_eff * (mus * ml - lam * m1 - log_z)
     sd = MU_PRIOR_SD if prior_sd is None else float(prior_sd)
     if not sd > 0:
@@ -129,16 +132,7 @@ def truncated_gamma_fit(diameter_m, weight, d_fit_m: float, *, prior_sd: float |
         if den < 0:
             mu += 0.1 * float(np.clip(0.5 * (ll[k - 1] - ll[k + 1]) / den, -0.5, 0.5))
     # Lambda and the normalisation at the refined mu
-    one = np.array([mu])
-    lo1, hi1 = np.array([math.log(1e-3 / m1)]), np.array([math.log(1e3 / m1 + 1e4)])
-    for _ in range(60):
-        mid = 0.5 * (lo1 + hi1)
-        mean, _ = moments(one, np.exp(mid))
-        high = mean > m1
-        lo1 = np.where(high, mid, lo1)
-        hi1 = np.where(high, hi1, mid)
-    lam1 = np.exp(0.5 * (lo1 + hi1))
-    _, lz = moments(one, lam1)
+    lam1, lz = fit_lambda(np.array([mu]))
     return mu, float(lam1[0]), float(lz[0])
 
 
