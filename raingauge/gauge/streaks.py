@@ -794,13 +794,28 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
                             grow_rows=grow_rows)
 
 
+def _reach_kernel(grow_rows: int, slope: float) -> np.ndarray:
+    """The structuring element of the hysteresis growth: a line of 2 ``grow_rows`` + 1 rows
+    along the fall dx/dy = ``slope`` (one pixel per row, the nearest to the line; a column
+    below 0.05).  Grown down the column only, a streak slanted by the wind kept only
+    upright pieces of its pixels between the threshold and its growth."""
+    g = int(grow_rows)
+    if abs(slope) < 0.05:
+        return np.ones((2 * g + 1, 1), np.uint8)
+    half = int(math.ceil(abs(slope) * g))
+    k = np.zeros((2 * g + 1, 2 * half + 1), np.uint8)
+    rows = np.arange(-g, g + 1)
+    k[rows + g, np.rint(slope * rows).astype(int) + half] = 1
+    return k
+
+
 def _label_and_merge(mask, low, *, min_pixels, merge_gap_px, slope, grow_rows):
     """:func:`detect_streaks` from its masks on: the hysteresis growth (with ``low``), the
     labelling, the small components' area set to 0, and the merge of collinear pieces."""
     import cv2
 
     if low is not None:
-        reach = cv2.dilate(mask, np.ones((2 * int(grow_rows) + 1, 1), np.uint8))
+        reach = cv2.dilate(mask, _reach_kernel(int(grow_rows), slope))
         mask = cv2.bitwise_or(mask, cv2.bitwise_and(low, reach))
     if _kernels.AVAILABLE:
         # the same labels from the mask's runs (the mask is sparse: a few percent of the frame)
