@@ -711,3 +711,25 @@ def test_streak_table_engine_is_checked():
     stats = np.zeros((1, 5), np.int64)
     with pytest.raises(ValueError, match="engine"):
         measure_streak_table(np.zeros((20, 20), np.float32), labels, stats, [], engine="gpu")
+
+
+def test_growth_reaches_along_the_slanted_fall():
+    """The hysteresis growth follows the fall: a faint streak slanted by the wind (0.7 px
+    across per row) that passes the threshold c only in a short bright stretch takes its
+    pixels at or above grow c for grow_rows rows either way along its slant.  Grown down the
+    columns, it kept less: the 3-px streak leaves a column within four rows."""
+    shape = (120, 120)
+    slope, c = 0.7, 3.0
+    img = np.zeros(shape, np.float32)
+    rows = np.arange(20, 100)
+    x = 30.0 + slope * (rows - 20)
+    for r, xc in zip(rows, x):
+        lo = int(np.floor(xc - 1.0))
+        img[r, lo:lo + 3] = 0.8 * c           # faint: above grow c = 0.6 c, under c
+    img[57:63] *= 1.5                         # a bright stretch of 6 rows: 1.2 c
+    labels, stats = detect_streaks(img, c=c, smooth_px=1, slope=slope, grow=0.6, grow_rows=6, merge_gap_px=0)
+    big = np.argmax(stats[:, 4])
+    assert stats[big, 3] >= 6 + 2 * 6 - 1     # the bright rows and 6 more either way
+    # straight down, the same growth keeps the stretch and at most four rows either way
+    labels0, stats0 = detect_streaks(img, c=c, smooth_px=1, slope=0.0, grow=0.6, grow_rows=6, merge_gap_px=0)
+    assert stats0[np.argmax(stats0[:, 4]), 3] <= 6 + 2 * 4
