@@ -730,6 +730,11 @@ def test_growth_reaches_along_the_slanted_fall():
     labels, stats = detect_streaks(img, c=c, smooth_px=1, slope=slope, grow=0.6, grow_rows=6, merge_gap_px=0)
     big = np.argmax(stats[:, 4])
     assert stats[big, 3] >= 6 + 2 * 6 - 1     # the bright rows and 6 more either way
+    # smoothed along several directions (a cross wind's sizes, the search for the rain's
+    # direction), it reaches along each of them
+    labels2, stats2 = detect_streaks(img, c=c, smooth_px=1, slope=0.0, slopes=[-0.7, 0.7], grow=0.6, grow_rows=6,
+                                     merge_gap_px=0)
+    assert stats2[np.argmax(stats2[:, 4]), 3] >= 6 + 2 * 6 - 1
     # straight down, the same growth keeps the stretch and at most four rows either way
     labels0, stats0 = detect_streaks(img, c=c, smooth_px=1, slope=0.0, grow=0.6, grow_rows=6, merge_gap_px=0)
     assert stats0[np.argmax(stats0[:, 4]), 3] <= 6 + 2 * 4

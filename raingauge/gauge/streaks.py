@@ -757,6 +757,7 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
             mask, low = _kernels.spike_masks(*spike, n_s, float(c) * n_s,
                                              float(c * grow) * n_s if grow < 1.0 else None)
             return _label_and_merge(mask, low, min_pixels=min_pixels, merge_gap_px=merge_gap_px, slope=slope,
+                                    grow_slopes=extra,
                                     grow_rows=grow_rows)
         spike = spike_image(*spike)
     if spike.dtype == np.int16 and abs(slope) < 0.05 and not extra and 0 < smooth_px <= 64:
@@ -791,7 +792,7 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
         mask = cv2.compare(s, float(c), cv2.CMP_GE)
         low = cv2.compare(s, float(c * grow), cv2.CMP_GE) if grow < 1.0 else None
     return _label_and_merge(mask, low, min_pixels=min_pixels, merge_gap_px=merge_gap_px, slope=slope,
-                            grow_rows=grow_rows)
+                            grow_slopes=extra, grow_rows=grow_rows)
 
 
 def _reach_kernel(grow_rows: int, slope: float) -> np.ndarray:
@@ -809,13 +810,17 @@ def _reach_kernel(grow_rows: int, slope: float) -> np.ndarray:
     return k
 
 
-def _label_and_merge(mask, low, *, min_pixels, merge_gap_px, slope, grow_rows):
-    """:func:`detect_streaks` from its masks on: the hysteresis growth (with ``low``), the
-    labelling, the small components' area set to 0, and the merge of collinear pieces."""
+def _label_and_merge(mask, low, *, min_pixels, merge_gap_px, slope, grow_rows, grow_slopes=()):
+    """:func:`detect_streaks` from its masks on: the hysteresis growth (with ``low``; along
+    ``slope`` and each of ``grow_slopes``, the other directions the change was smoothed
+    along), the labelling, the small components' area set to 0, and the merge of collinear
+    pieces."""
     import cv2
 
     if low is not None:
         reach = cv2.dilate(mask, _reach_kernel(int(grow_rows), slope))
+        for other in grow_slopes or ():
+            reach = cv2.max(reach, cv2.dilate(mask, _reach_kernel(int(grow_rows), other)))
         mask = cv2.bitwise_or(mask, cv2.bitwise_and(low, reach))
     if _kernels.AVAILABLE:
         # the same labels from the mask's runs (the mask is sparse: a few percent of the frame)
