@@ -262,7 +262,7 @@ LAW_SLOPE_MIN_ASPECT = 4.0
 DIRECTION_SEARCH_SLOPES = tuple(float(x) for x in np.arange(-6, 7) * 0.25)
 DIRECTION_SEARCH_FRAMES = 30
 DIRECTION_SEARCH_EVERY = 5
-DIRECTION_CHECK_EVERY = 60
+DIRECTION_CHECK_EVERY = 300
 #: The counted drops' median direction is taken for the rain's while it lies within this of
 #: the searched frames' [px/px].
 DIRECTION_AGREEMENT = 0.15
