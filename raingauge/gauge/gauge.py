@@ -263,9 +263,11 @@ DIRECTION_SEARCH_SLOPES = tuple(float(x) for x in np.arange(-6, 7) * 0.25)
 DIRECTION_SEARCH_FRAMES = 30
 DIRECTION_SEARCH_EVERY = 5
 DIRECTION_CHECK_EVERY = 300
-#: The counted drops' median direction is taken for the rain's while it lies within this of
-#: the searched frames' [px/px].
-DIRECTION_AGREEMENT = 0.15
+#: The counted drops give the rain's direction and drift unless the search's law-abiding
+#: streaks drift otherwise by more than this [m/s] or this share of their drift [-], the
+#: larger (their drift is taken at the focus distance and reads 0.7 of the counted drops'
+#: at 3 m/s; the slants of both differ with their mix of sizes, u / v(a)).
+DIRECTION_DRIFT_AGREEMENT = (1.0, 0.5)
 
 #: Longest span [s] between a frame and either neighbour over which the three-frame test of
 #: Eq. (19) is still applied: across a longer outage the scene (light, wet surfaces) may
@@ -951,15 +953,20 @@ class RainGauge:
             prepared = []
         # (of the long ones: a short or blurred streak's axis is ill defined, its moments
         # lean towards the vertical)
+        # the drift: from the search until it gave the direction, then from the frame's own
+        # detection along it (the search's more sensitive one also finds the faint far drops,
+        # whose drift at the focus distance reads low: 1.8-2.5 m/s in 3 m/s)
+        own = [c for c in prepared if c["mot"] >= LAW_SLOPE_MIN_ASPECT * c["w_app"]]
+        known = len(self._law_slopes) >= 5
         if self.defocus_model != "uniform":
-            axial = [c for c in prepared if c["mot"] >= LAW_SLOPE_MIN_ASPECT * c["w_app"]]
+            axial = own
         elif self._direction_search_due():
             axial = self._search_direction(spike, slope, vol, change, prev, cur, t, ref_bg, contrast)
         else:
             axial = []
         self._law_slopes.extend(c["slope"] for c in axial)
         k_drift = prof.focus_distance_m / (prof.focal_length_px * prof.exposure_s)
-        self._law_drifts.extend(c["dx"] * k_drift for c in axial)
+        self._law_drifts.extend(c["dx"] * k_drift for c in (own if known else axial))
         # the backgrounds E_b behind the streaks (a neighbour frame): the drop sizes they leave
         # visible set this frame's sample volume (raingauge.gauge.volume.SampleVolume.kappa)
         entry = [t, flags, rejected, self._last_mean_bg, background_histogram(prev),
@@ -1044,9 +1051,16 @@ class RainGauge:
         return [c for c in found if c["mot"] >= LAW_SLOPE_MIN_ASPECT * c["w_app"]]
 
     def _counted_direction(self) -> bool:
-        """Whether the counted drops give the rain's direction (:meth:`_rain_slope`)."""
-        return (len(self._slopes) >= 5 and len(self._law_slopes) >= 5 and
-                abs(float(np.median(self._slopes)) - float(np.median(self._law_slopes))) <= DIRECTION_AGREEMENT)
+        """Whether the counted drops give the rain's direction (:meth:`_rain_slope`): five
+        were counted, and the search's law-abiding streaks do not drift otherwise
+        (:data:`DIRECTION_DRIFT_AGREEMENT`)."""
+        if len(self._slopes) < 5:
+            return False
+        if len(self._law_drifts) < 5:
+            return True
+        law = float(np.median(self._law_drifts))
+        tol = max(DIRECTION_DRIFT_AGREEMENT[0], DIRECTION_DRIFT_AGREEMENT[1] * abs(law))
+        return abs(float(np.median(self._drifts)) - law) <= tol
 
     def _rain_slope(self) -> float:
         """The rain's direction in the image, dx/dy [-], that the detection smooths along.
@@ -1054,8 +1068,8 @@ class RainGauge:
         The median direction of the last streaks that passed the velocity law on the frames
         searched along all directions (:data:`DIRECTION_SEARCH_SLOPES`; their drops may
         still wait for the drop brightness E_r), taken from 0.05 on (below it the detection
-        smooths straight down anyway); the median of the last counted drops' where it lies
-        within :data:`DIRECTION_AGREEMENT` of it; 0 until five such streaks were seen.  In a
+        smooths straight down anyway); the median of the last counted drops' where they
+        agree with them (:meth:`_counted_direction`); 0 until five either were seen.  In a
         cross wind the streaks slant by u / v(a): smoothing straight down, a faint slanted
         streak would not be detected, and the drops it would have counted not be counted
         either."""
