@@ -957,9 +957,33 @@ def test_rain_direction_comes_from_the_search_along_all_directions():
     assert g._wind_m_s() == pytest.approx(2.2)
 
 
+def test_counted_drift_beyond_the_searchs_gives_the_direction():
+    """Both estimates of the drift are pulled towards zero by what they get wrong: the
+    counted drops by a detection smoothed straight down, the search's streaks by the
+    noise streaks of a textured scene at 3 gray levels (near upright, of either slant).
+    So the counted drops give the direction when they drift at least as far as the
+    search's streaks, agreeing or not.  Held to the search's near-upright 0.3 m/s, the
+    drops slanted by a 3 m/s wind over a textured wall at noise 3 were smoothed upright
+    and the rate read 0.2 of the truth at 10 mm/h."""
+    g = RainGauge(CAM, velocity_model="gunn_kinzer")
+    g._law_slopes.extend([0.22, 0.1, -0.43, -0.83, 0.36, 0.45, -0.09, 0.33])
+    g._law_drifts.extend([0.5, 0.2, -0.9, -1.8, 0.8, 1.0, -0.2, 0.3])   # noise streaks
+    g._slopes.extend([0.55, 0.6, 0.62, 0.58, 0.64, 0.57])
+    g._drifts.extend([2.8, 3.0, 2.9, 3.1, 2.7, 2.95])
+    assert g._counted_direction()
+    assert g._rain_slope() == pytest.approx(0.59)
+    assert g._wind_m_s() == pytest.approx(2.925)
+    g._law_slopes.extend([0.6] * 50)                        # the search's streaks drift further:
+    g._law_drifts.extend([3.0] * 50)
+    g._slopes.extend([0.01] * 50)                           # the counted ones were held upright
+    g._drifts.extend([0.1] * 50)
+    assert not g._counted_direction()
+    assert g._rain_slope() == pytest.approx(0.6)
+
+
 def test_direction_search_schedule():
     """While the direction is not known the first DIRECTION_SEARCH_FRAMES frames are searched,
-    then every DIRECTION_SEARCH_EVERY-th; once five streaks gave it, every
+    then every DIRECTION_SEARCH_EVERY-th; once DIRECTION_KNOWN_STREAKS streaks gave it, every
     DIRECTION_CHECK_EVERY-th (the search costs several detections)."""
     import raingauge.gauge.gauge as gg
 
@@ -972,7 +996,11 @@ def test_direction_search_schedule():
     assert all(due[:first])
     assert [n for n, d in zip(range(first + 1, 121), due[first:]) if d] == \
         [n for n in range(first + 1, 121) if n % gg.DIRECTION_SEARCH_EVERY == 0]
-    g._law_slopes.extend([0.0] * 5)
+    g._law_slopes.extend([0.0] * (gg.DIRECTION_KNOWN_STREAKS - 1))
+    assert g._rain_slope() == 0.0                           # five give a first direction ...
+    g._n_in = first + 2 * gg.DIRECTION_SEARCH_EVERY
+    assert g._direction_search_due()                        # ... and the search goes on
+    g._law_slopes.append(0.0)
     known = []
     for n in range(121, 400):
         g._n_in = n
@@ -989,6 +1017,73 @@ def test_rain_direction_is_learned_in_a_cross_wind_at_noise_3():
     sim = pytest.importorskip("raingauge.render.simulator")
     cam = default_profile().replace(width_px=480, height_px=270, noise_sigma_dn=3.0)
     frames, _ = sim.render_clip(cam, n_frames=90, rain_rate_mm_h=10.0, seed=8, wind_m_s=3.0)
+    g = RainGauge(cam, velocity_model="gunn_kinzer")
+    for fr in frames:
+        g.process(fr)
+    assert 0.3 <= g._rain_slope() <= 0.9
+    assert 1.5 <= g._wind_m_s() <= 3.6
+
+
+def test_direction_streaks_are_as_long_as_a_millimetre_drops_where_noise_makes_streaks():
+    """The streaks the direction is learned from are four times as long as wide; where the
+    noise's twin of the searched frames holds streaks that pass the velocity law, also at
+    least as long as the focused streak of a 1-mm drop (f T v(1 mm) / z0: 45 px on the
+    default camera; the noise streaks of a low-contrast scene are 15-35 px)."""
+    import raingauge.gauge.gauge as gg
+    from raingauge.physics.drops import fall_velocity
+
+    g = RainGauge(CAM, velocity_model="gunn_kinzer")
+    length = (CAM.focal_length_px * CAM.exposure_s / CAM.focus_distance_m *
+              float(fall_velocity(gg.LAW_SLOPE_MIN_DIAMETER_M, model="gunn_kinzer")))
+    assert g._law_min_motion_px == pytest.approx(length)
+    short, long_ = {"mot": 0.7 * length, "w_app": 2.0}, {"mot": 1.1 * length, "w_app": 2.8}
+    wide = {"mot": 1.1 * length, "w_app": 0.3 * length}
+    g._n_searched, g._n_search_noise = 40, 0                 # no noise streaks: a small drop's will do
+    assert g._shows_direction(short) and g._shows_direction(long_) and not g._shows_direction(wide)
+    g._n_search_noise = int(gg.SEARCH_NOISE_STREAKS * CAM.width_px * CAM.height_px * 1e-6 * 40) + 1
+    assert not g._shows_direction(short)
+    assert g._shows_direction(long_) and not g._shows_direction(wide)
+
+
+def test_the_noise_twin_of_a_still_frame_holds_no_rain():
+    """The search counts the law-abiding streaks of each frame's noise's twin, frame n mirrored
+    about the mean of its neighbours: none on a clean rainy clip (the rain only brightens),
+    many over a textured wall at 3 gray levels of noise without rain."""
+    import raingauge.gauge.gauge as gg
+
+    sim = pytest.importorskip("raingauge.render.simulator")
+    counts = []
+    for rate, noise, bg in ((10.0, 0.0, "uniform:40"), (0.0, 3.0, "skimage:brick")):
+        cam = default_profile().replace(width_px=480, height_px=270, noise_sigma_dn=noise)
+        frames, _ = sim.render_clip(cam, n_frames=40, rain_rate_mm_h=rate, seed=3, background=bg)
+        g = RainGauge(cam, velocity_model="gunn_kinzer")
+        found = 0
+        orig = g._search_direction
+
+        def spy(*a, **k):
+            nonlocal found
+            out = orig(*a, **k)
+            found += len(out)
+            return out
+        g._search_direction = spy
+        for fr in frames:
+            g.process(fr)
+        assert g._n_searched >= 10
+        counts.append((g._n_search_noise, found, g._n_searched))
+    (clean_noise, clean_found, _), (dry_noise, _, dry_searched) = counts
+    assert clean_found >= 5 and clean_noise == 0
+    assert dry_noise > 10 * gg.SEARCH_NOISE_STREAKS * (480 * 270 * 1e-6) * dry_searched
+
+
+def test_rain_direction_is_learned_over_a_textured_wall_at_noise_3():
+    """Over a textured wall at 3 gray levels of noise the search finds noise streaks that pass
+    the velocity law, near upright and of either slant; taken with the drops' streaks they
+    held the direction at -0.2-0.2 where a 3 m/s wind slants the drops by 0.4-0.7.  Only the
+    streaks as long as a 1-mm drop's show the direction."""
+    sim = pytest.importorskip("raingauge.render.simulator")
+    cam = default_profile().replace(width_px=480, height_px=270, noise_sigma_dn=3.0)
+    frames, _ = sim.render_clip(cam, n_frames=150, rain_rate_mm_h=10.0, seed=1, wind_m_s=3.0,
+                                background="skimage:brick")
     g = RainGauge(cam, velocity_model="gunn_kinzer")
     for fr in frames:
         g.process(fr)

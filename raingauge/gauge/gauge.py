@@ -243,13 +243,28 @@ MAX_CROSS_CHI2 = 8.0
 #: Least length over width of a law-abiding streak whose direction is taken for the rain's
 #: while no drop was counted yet [-].
 LAW_SLOPE_MIN_ASPECT = 4.0
+#: ... and least diameter [m] of the drop whose focused streak (at the focus distance, on
+#: the velocity law) is as long as the shortest of them.  The streaks that smoothed noise
+#: leaves in a low-contrast scene are as long as a small drop's (15-35 px where a 1-mm
+#: drop's is 45 px, of either slant about the vertical: over a textured wall at 3 gray
+#: levels, 17 per frame searched along all directions, 1 % of them 40 px or longer);
+#: taken with them, the direction of a 3 m/s wind's drops (0.4-0.6 px/px) read 0.1-0.2.
+LAW_SLOPE_MIN_DIAMETER_M = 1.0e-3
+#: Law-abiding streaks per searched frame and megapixel in the noise's twin of the frames
+#: (frame n mirrored about the mean of its neighbours: no rain, as much noise) over which
+#: the search's streaks show the direction only from :data:`LAW_SLOPE_MIN_DIAMETER_M` on.
+#: Over the textured wall at 3 gray levels ~17 per frame at 1280x720, none at 1; where there are none,
+#: the shorter streaks of small drops are kept (in light rain, the long ones are few:
+#: at 0.5 mm/h the direction came 20 s later and the rate read 0.6 for 0.87).
+SEARCH_NOISE_STREAKS = 0.5
 
 #: The rain's direction in the image is learned from a second detection of a frame, smoothed
 #: along all of these directions dx/dy [px/px] (slants of up to 1.5: drops of 0.5 mm and
 #: more in cross winds up to about 3 m/s), :data:`~raingauge.gauge.streaks.WIND_SLOPE_STEP`
 #: apart (:meth:`RainGauge._search_direction`): on the first :data:`DIRECTION_SEARCH_FRAMES`
-#: frames and every :data:`DIRECTION_SEARCH_EVERY`-th after them until five law-abiding
-#: streaks long enough to show the direction were found so (the search costs several
+#: frames and every :data:`DIRECTION_SEARCH_EVERY`-th after them until
+#: :data:`DIRECTION_KNOWN_STREAKS` law-abiding streaks long enough to show the direction
+#: (:meth:`RainGauge._shows_direction`) were found so (the search costs several
 #: times the frame's own detection: in a dry scene it goes on), then on every
 #: :data:`DIRECTION_CHECK_EVERY`-th (the wind turns).  Taken from the frames'
 #: own detection, smoothed along one direction, the direction stayed there: a slanted
@@ -263,6 +278,12 @@ DIRECTION_SEARCH_SLOPES = tuple(float(x) for x in np.arange(-6, 7) * 0.25)
 DIRECTION_SEARCH_FRAMES = 30
 DIRECTION_SEARCH_EVERY = 5
 DIRECTION_CHECK_EVERY = 300
+#: Law-abiding streaks of the search after which the direction is known (searched only every
+#: :data:`DIRECTION_CHECK_EVERY`-th frame; their drift is then taken from the frames' own
+#: detection).  Five give a first direction; among five over a bright sky at 3 gray levels
+#: at 0.5 mm/h, three were noise streaks and held the direction at 0.08 where the drops
+#: slanted by 0.6.
+DIRECTION_KNOWN_STREAKS = 15
 #: The counted drops give the rain's direction and drift unless the search's law-abiding
 #: streaks drift otherwise by more than this [m/s] or this share of their drift [-], the
 #: larger (their drift is taken at the focus distance and reads 0.7 of the counted drops'
@@ -666,6 +687,11 @@ class RainGauge:
                        else max(profile.detection_threshold_dn, 1.2 * noise))
         self.smooth_px = int(smooth_px)
         self.min_drops = int(min_drops)
+        from raingauge.physics.drops import fall_velocity
+
+        #: least length [px] of the streaks the rain's direction is taken from
+        self._law_min_motion_px = float(profile.focal_length_px * profile.exposure_s / profile.focus_distance_m *
+                                        fall_velocity(LAW_SLOPE_MIN_DIAMETER_M, model=velocity_model))
         self.noise_change = max(noise, 0.5) * math.sqrt(1.5)
         self._motion_dn = max(30.0, 8.0 * noise)       # a change no raindrop makes [gray levels]
         if defocus_model not in DEFOCUS_MODELS:
@@ -728,6 +754,8 @@ class RainGauge:
         # (found by the search along all directions, DIRECTION_SEARCH_SLOPES)
         self._law_slopes: deque = deque(maxlen=50)
         self._law_drifts: deque = deque(maxlen=50)       # and their drift dx z0 / (f T) [m/s]
+        self._n_searched = 0                             # frames searched for the direction
+        self._n_search_noise = 0                         # and the law-abiding streaks of their noise's twins
         self._n_searched_unknown = 0                     # frames analysed before the direction was known
         self._frame_slope = 0.0                         # the direction the last frame was smoothed along
         self._pending: list = []                        # frames awaiting the E_r estimate
@@ -956,8 +984,8 @@ class RainGauge:
         # the drift: from the search until it gave the direction, then from the frame's own
         # detection along it (the search's more sensitive one also finds the faint far drops,
         # whose drift at the focus distance reads low: 1.8-2.5 m/s in 3 m/s)
-        own = [c for c in prepared if c["mot"] >= LAW_SLOPE_MIN_ASPECT * c["w_app"]]
-        known = len(self._law_slopes) >= 5
+        own = [c for c in prepared if self._shows_direction(c)]
+        known = len(self._law_slopes) >= DIRECTION_KNOWN_STREAKS
         if self.defocus_model != "uniform":
             axial = own
         elif self._direction_search_due():
@@ -1028,9 +1056,9 @@ class RainGauge:
     def _direction_search_due(self) -> bool:
         """Whether this frame is searched for the rain's direction (:meth:`_search_direction`):
         while it is not known, each of the first :data:`DIRECTION_SEARCH_FRAMES` analysed
-        frames and then every :data:`DIRECTION_SEARCH_EVERY`-th; once known, every
-        :data:`DIRECTION_CHECK_EVERY`-th."""
-        if len(self._law_slopes) >= 5:
+        frames and then every :data:`DIRECTION_SEARCH_EVERY`-th; once known
+        (:data:`DIRECTION_KNOWN_STREAKS`), every :data:`DIRECTION_CHECK_EVERY`-th."""
+        if len(self._law_slopes) >= DIRECTION_KNOWN_STREAKS:
             return self._n_in % DIRECTION_CHECK_EVERY == 0
         self._n_searched_unknown += 1
         return (self._n_searched_unknown <= DIRECTION_SEARCH_FRAMES or
@@ -1042,6 +1070,21 @@ class RainGauge:
         measured (nothing logged): the streaks the rain's direction is learned from
         (:meth:`_rain_slope`).  The frame's own detection, which counts its drops, is the
         one the sample volume models (smoothed along the rain's direction only)."""
+        found = self._search_streaks(spike, slope, vol, change, prev, cur, t, ref_bg, contrast)
+        # the noise's twin: frame n mirrored about the mean of its neighbours, I'_n = I_{n-1} +
+        # I_{n+1} - I_n, changes by -(I_n - (I_{n-1} + I_{n+1}) / 2): the rain (which only
+        # brightens, Eq. 19) is gone from it and the noise streaks are as many
+        p, c, n = (np.asarray(a, dtype=np.float32) for a in change)
+        twin = p + n - c
+        noise = self._search_streaks(spike_image(p, twin, n), slope, vol, (p, twin, n), p, twin, t, ref_bg,
+                                     contrast)
+        self._n_searched += 1
+        self._n_search_noise += len(noise)
+        return [c for c in found if self._shows_direction(c)]
+
+    def _search_streaks(self, spike, slope, vol, change, prev, cur, t, ref_bg, contrast) -> list:
+        """The law-abiding streaks over :data:`LAW_SLOPE_MIN_ASPECT` times as long as wide of a
+        detection smoothed along all directions :data:`DIRECTION_SEARCH_SLOPES`."""
         labels, stats = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope,
                                        slopes=DIRECTION_SEARCH_SLOPES, grow=vol.grow)
         if not np.any(stats[1:, 4] > 0):
@@ -1050,17 +1093,40 @@ class RainGauge:
                                        probe=True)
         return [c for c in found if c["mot"] >= LAW_SLOPE_MIN_ASPECT * c["w_app"]]
 
+    def _noise_streaks(self) -> bool:
+        """Whether the search finds noise streaks that pass the velocity law: over
+        :data:`SEARCH_NOISE_STREAKS` per searched frame and megapixel in the noise's twin of
+        the frames (:meth:`_search_direction`)."""
+        mpx = self.profile.width_px * self.profile.height_px * 1e-6
+        return self._n_search_noise > SEARCH_NOISE_STREAKS * mpx * self._n_searched
+
+    def _shows_direction(self, c: dict) -> bool:
+        """Whether a law-abiding streak is long enough to show the rain's direction: over
+        :data:`LAW_SLOPE_MIN_ASPECT` times its width, and, where the search finds noise
+        streaks (:meth:`_noise_streaks`), at least as long as the focused streak of a drop
+        of :data:`LAW_SLOPE_MIN_DIAMETER_M`."""
+        least = LAW_SLOPE_MIN_ASPECT * c["w_app"]
+        if self._noise_streaks():
+            least = max(least, self._law_min_motion_px)
+        return c["mot"] >= least
+
     def _counted_direction(self) -> bool:
         """Whether the counted drops give the rain's direction (:meth:`_rain_slope`): five
         were counted, and the search's law-abiding streaks do not drift otherwise
-        (:data:`DIRECTION_DRIFT_AGREEMENT`)."""
+        (:data:`DIRECTION_DRIFT_AGREEMENT`) or drift less far.  What either gets wrong
+        pulls its drift towards zero: the counted drops' a detection smoothed straight
+        down (slanted drops fall apart into upright pieces), the search's the noise
+        streaks of a textured scene at 3 gray levels (near upright, of either slant;
+        held to them, the drops of a 3 m/s wind over a textured wall read 0.2-0.3 of the
+        rain at 10 mm/h)."""
         if len(self._slopes) < 5:
             return False
         if len(self._law_drifts) < 5:
             return True
         law = float(np.median(self._law_drifts))
+        counted = float(np.median(self._drifts))
         tol = max(DIRECTION_DRIFT_AGREEMENT[0], DIRECTION_DRIFT_AGREEMENT[1] * abs(law))
-        return abs(float(np.median(self._drifts)) - law) <= tol
+        return abs(counted - law) <= tol or abs(counted) >= abs(law)
 
     def _rain_slope(self) -> float:
         """The rain's direction in the image, dx/dy [-], that the detection smooths along.
