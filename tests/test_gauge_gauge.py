@@ -1089,3 +1089,28 @@ def test_rain_direction_is_learned_over_a_textured_wall_at_noise_3():
         g.process(fr)
     assert 0.3 <= g._rain_slope() <= 0.9
     assert 1.5 <= g._wind_m_s() <= 3.6
+
+
+def test_low_contrast_flag_waits_for_a_settled_drop_brightness(monkeypatch):
+    """The ``low_contrast`` flag (which turns on the hysteresis growth that finds faint
+    streaks) takes the drop brightness E_r from the streaks only once FLAG_BRIGHTNESS_SAMPLES
+    back it, the nominal before.  From 10 samples over a textured wall at noise 3 in a wind
+    it read 230 for 200, the growth went off, no more faint streaks were found and the
+    estimate never grew: 3 drops in a minute of 0.5 mm/h."""
+    import raingauge.gauge.gauge as gg
+
+    g = RainGauge(CAM, velocity_model="gunn_kinzer")
+    monkeypatch.setattr(g, "_drop_brightness", lambda: 230.0)
+    bg = 112
+    assert gg.NOMINAL_DROP_BRIGHTNESS_DN - bg < 30.0 * g.c <= 230.0 - bg
+    frame = np.full((CAM.height_px, CAM.width_px), bg, np.uint8)
+    still = np.zeros((CAM.height_px // 2, CAM.width_px // 2), np.float32)
+
+    def low_contrast():
+        return "low_contrast" in g._frame_flags(frame, frame.astype(np.float32), still, False)
+
+    g._brightness.extend([float(bg)] * 10, [230.0] * 10)
+    assert low_contrast()
+    more = gg.FLAG_BRIGHTNESS_SAMPLES - 10
+    g._brightness.extend([float(bg)] * more, [230.0] * more)
+    assert not low_contrast()
