@@ -185,7 +185,16 @@ def test_blobs_are_the_drops_components_and_the_frames_streaks_merged_in_them(vo
             np.testing.assert_array_equal(blob2, blob)
             assert partners2 == partners
         for j, (p, (cx, cy)) in enumerate(zip(plan, centres)):
-            assert blob[j] == labels[int(round(cy)), int(round(cx))] > 0
+            at_centre = labels[int(round(cy)), int(round(cx))]
+            if at_centre > 0:
+                assert blob[j] == at_centre
+            else:
+                # a faint defocused drop found only in pieces: the piece on its axis, if any
+                (x0, y0), (x1, y1) = (np.array(q) + (np.array(cx_cy) - np.array(p["centre"]))
+                                      for q, cx_cy in ((p["p0"], (cx, cy)), (p["p1"], (cx, cy))))
+                ys = np.arange(int(math.ceil(y0)), int(math.floor(y1)) + 1)
+                on_axis = set(labels[ys, np.rint(x0 + (ys - y0) * (x1 - x0) / max(y1 - y0, 1e-9)).astype(int)].tolist())
+                assert blob[j] == 0 or blob[j] in on_axis
             # the rain columns under the drop's capsule, and those near it
             x, r = p["centre"][0], p["radius_px"]
             cols = np.flatnonzero(rain & (np.abs(np.arange(N) - x) <= r - 0.5))
@@ -539,12 +548,14 @@ def test_canvas_rounds_a_faint_streak_once_and_keeps_the_pixels_noise(volume):
         change = exact[1] - flat[0, 0]
         raws = tuple(np.full(CAM.shape, 100, np.uint8) for _ in range(3))
         lin, raw, _c = probe.canvas((flat, flat, flat), plan, 110.0, raws=raws, delinearize=CAM.delinearize)
-        on = change > 0.05
+        # the pixels whose change is under half a gray level: rounded twice they would not
+        # change at all
+        on = (change > 0.05) & (change < 0.5)
         diff_raw.append(raw[1][on].astype(float) - 100.0)
         diff_true.append(change[on])
     got, want = np.concatenate(diff_raw), np.concatenate(diff_true)
     assert got.size > 2000
-    assert 0.3 < want.mean() < 1.2 and abs(np.mean(np.round(want)) - want.mean()) > 0.05
+    assert 0.15 < want.mean() < 0.5 and not np.round(want).any()
     assert got.mean() == pytest.approx(want.mean(), abs=0.03)
     assert np.array_equal(lin[1], raw[1].astype(np.float32))
 

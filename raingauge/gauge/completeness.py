@@ -102,7 +102,7 @@ from raingauge.gauge._numeric import clip as _clip
 __all__ = ["CompletenessProbe", "CLASS_EDGES_M"]
 
 #: Edges of the probe's radius classes [m] (drop diameters 0.3-5.6 mm).
-CLASS_EDGES_M = np.array([0.15e-3, 0.25e-3, 0.4e-3, 0.6e-3, 0.9e-3, 1.4e-3, 2.8e-3])
+CLASS_EDGES_M = np.array([0.15e-3, 0.25e-3, 0.4e-3, 0.6e-3, 0.9e-3, 1.4e-3, 2.0e-3, 2.8e-3])
 
 #: Clear margin around an injected streak inside its crop [px] (the detection's smoothing,
 #: the measurement's flanks and the edge margin fit in it).

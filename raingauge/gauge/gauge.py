@@ -518,6 +518,13 @@ def _contrast_of_percentile(e: float, q_ref) -> float:
     return c
 
 
+def _law_max_diameter(model: str) -> float:
+    """The largest diameter the fall-velocity law ``model`` is defined at [m]."""
+    from raingauge.physics.drops import FALL_VELOCITY_RANGES_M
+
+    return float(FALL_VELOCITY_RANGES_M.get(model, (0.0, 7.0e-3))[1])
+
+
 def _mean_linear(frame: np.ndarray, step: int) -> float:
     """``np.mean(frame[::step, ::step])`` of the frame as linear float32 intensities
     (8-bit frames of a linear camera as ``frame.astype(np.float32)``) [gray levels].
@@ -1374,10 +1381,14 @@ class RainGauge:
         motion = h - width - (self.smooth_px - 1)
         idx = np.flatnonzero(whole & (h >= 6) & (motion > 1) & (area > 0))
         a = width[idx] * prof.focus_distance_m / (2 * prof.focal_length_px)
+        # the box estimates read wide (threshold halo, slant): the largest drops' crude size
+        # lies beyond the law's largest (in a 3 m/s cross wind area / height read 1.19 times
+        # the width of a 5.2-mm drop), where its r is undefined.  Taken at the law's largest
+        # size, they are left to the measured width's test
+        a = np.minimum(a, 0.5 * _law_max_diameter(self.velocity_model))
         v = np.maximum(motion[idx], 1e-3) * prof.focus_distance_m / (prof.focal_length_px * prof.exposure_s)
         r = velocity_log_ratio(a, v, model=self.velocity_model)
-        # the box estimates read wide (threshold halo, slant): accepted drops lie within
-        # [-0.75, 0.35] of this crude r; keep a margin
+        # accepted drops lie within [-0.75, 0.35] of this crude r; keep a margin
         return idx[np.isfinite(r) & (r > -0.95) & (r < 0.55)] + 1
 
     def _measure_table(self, labels, stats, change, prev, cur, t, *, ref_bg=None, contrast=None,
