@@ -21,6 +21,7 @@ sees, and many sharp drops of one size move it.
 
     python benchmarks/diag_probe_fidelity.py --background bright_sky --points 0.45:2.48,0.5:2.5
     python benchmarks/diag_probe_fidelity.py --background dark_uniform --points 0.2:2.5 --seconds 20
+    python benchmarks/diag_probe_fidelity.py --background bright_sky --noise 1 --rate 0.5 --wind 3 --points 0.4:2.5 --seconds 20
 """
 
 from __future__ import annotations
@@ -51,6 +52,7 @@ def main(argv=None) -> int:
     add_clip_arguments(ap, rate=2.0, dsd="gamma3", seconds=30.0, seed=12, dsds=("marshall_palmer", "gamma3"))
     ap.add_argument("--points", default="0.45:2.48,0.5:2.5,0.55:2.53",
                     help="drops as RADIUS_MM:DEPTH_M, comma-separated")
+    ap.add_argument("--wind", type=float, default=0.0, help="cross wind [m/s]: the drops slant with it")
     ap.add_argument("--estimate-brightness", action="store_true",
                     help="let the gauge estimate E_r (the extra drops move the estimate)")
     args = ap.parse_args(argv)
@@ -64,7 +66,8 @@ def main(argv=None) -> int:
     except ValueError:
         ap.error(f"--points must be RADIUS_MM:DEPTH_M,..., e.g. --points 0.5:2.5, got {args.points!r}")
     prof = default_profile().replace(width_px=w, height_px=h, noise_sigma_dn=float(args.noise))
-    print(f"{args.background}, {args.rate:g} mm/h {args.dsd}, noise {args.noise:g}, {args.seconds:g} s, "
+    print(f"{args.background}, {args.rate:g} mm/h {args.dsd}, noise {args.noise:g}, wind {args.wind:g} m/s, "
+          f"{args.seconds:g} s, "
           f"E_r {'estimated' if args.estimate_brightness else 'given'}")
     print("  a [mm]  z [m]  r [px]  L [px]     extra counted        probe counted        "
           "rain per drop, extra / probe   model p   E_r")
@@ -73,7 +76,7 @@ def main(argv=None) -> int:
         res = probe_fidelity(prof, radius_m=1e-3 * a_mm, depth_m=z, background=spec, motion=motion,
                              drop_brightness_dn=e_r, rain_rate_mm_h=args.rate,
                              dsd="gamma" if args.dsd == "gamma3" else None, seconds=args.seconds,
-                             seed=args.seed, given_brightness=not args.estimate_brightness)
+                             seed=args.seed, wind_m_s=args.wind, given_brightness=not args.estimate_brightness)
         (rh, rt), (ph, pt) = res["real"], res["probe"]
         print(f"  {a_mm:6.3f}  {z:5.3f}  {res['radius_px']:6.2f}  {res['length_px']:6.1f}   "
               f"{rh:6d}/{rt:6d} = {rh / max(rt, 1):5.3f}   {ph:5d}/{pt:5d} = {ph / max(pt, 1):5.3f}   "

@@ -42,7 +42,7 @@ def scatter(shape, n: int, length_px: float, radius_px: float, rng, *, edge_px: 
 def probe_fidelity(profile, *, radius_m: float, depth_m: float, background: str = "ramp:150:190",
                    motion: str | None = None, drop_brightness_dn: float = 250.0, rain_rate_mm_h: float = 2.0,
                    dsd: str | None = "gamma", dsd_params: dict | None = None, seconds: float = 30.0,
-                   seed: int = 12, given_brightness: bool = True, coverage: float = 0.01) -> dict:
+                   seed: int = 12, given_brightness: bool = True, coverage: float = 0.01, wind_m_s: float = 0.0) -> dict:
     """The shares of extra drops and of the probe's drops of one radius and depth the
     gauge counted, in one simulated clip (module docstring).
 
@@ -68,6 +68,9 @@ def probe_fidelity(profile, *, radius_m: float, depth_m: float, background: str 
     coverage : float
         Share of the frame the extra drops' streaks cover, with a 3 px border each [-]
         (sets how many there are per frame).
+    wind_m_s : float
+        Cross wind of the clip [m/s] (to image right): the clip's drops and the extra ones
+        drift with it, each extra streak slanted by f u T / z over its length f v T / z.
 
     Returns
     -------
@@ -77,7 +80,7 @@ def probe_fidelity(profile, *, radius_m: float, depth_m: float, background: str 
     model's pass probability averaged over the probe's drops; ``drop_brightness_dn`` the
     gauge's E_r; ``radius_px`` and ``length_px`` of the streak.  An extra drop is counted when a
     counted drop of its frame lies within the streak's radius + 3 px across and a quarter
-    of its length + 3 px along from its centre.
+    of its length + 3 px along from its centre (and a quarter of its slant more across).
     """
     from raingauge.gauge.gauge import RainGauge
     from raingauge.gauge.volume import _pitch, whole_streak_area_px2
@@ -96,12 +99,13 @@ def probe_fidelity(profile, *, radius_m: float, depth_m: float, background: str 
                                 focus_distance_m=profile.focus_distance_m, pixel_pitch_m=_pitch(profile)))
     r = 0.5 * (max(2.0 * a_i, 1.0) + blur)
     length = f * v * profile.exposure_s / z
+    dx = f * float(wind_m_s) * profile.exposure_s / z
     per_frame = max(1, int(round(coverage * m * n / ((2.0 * r + 6.0) * (length + 2.0 * r + 6.0)))))
     if dsd == "gamma" and dsd_params is None:
         dsd_params = {"mu": 3.0}
     sim = simulate(profile, seconds=seconds, seed=seed, background=background, motion=motion,
                    drop_brightness_dn=drop_brightness_dn, rain_rate_mm_h=rain_rate_mm_h, dsd=dsd,
-                   dsd_params=dsd_params, truth_linear=True, truth_drops=False)
+                   dsd_params=dsd_params, truth_linear=True, truth_drops=False, wind_m_s=wind_m_s)
     g = RainGauge(profile, window_s=seconds, step_s=seconds, keep_drops=True,
                   drop_brightness_dn=drop_brightness_dn if given_brightness else None)
     if g.probe is None:
@@ -113,8 +117,8 @@ def probe_fidelity(profile, *, radius_m: float, depth_m: float, background: str 
     fps = profile.frame_rate_hz
     placed = {}
     for k, (_frame, ft) in enumerate(sim):
-        c = scatter((m, n), per_frame, length, r, rng)
-        half = np.array([0.0, 0.5 * length])
+        c = scatter((m, n), per_frame, length, r + 0.5 * abs(dx), rng)
+        half = np.array([0.5 * dx, 0.5 * length])
         beta, _ = render_streaks((m, n), c - half, c + half, np.full(len(c), r), np.full(len(c), math.pi * a_i ** 2))
         lin = compose_rain(ft["linear"], beta, drop_brightness_dn=drop_brightness_dn)
         placed[k] = c
@@ -138,7 +142,7 @@ def probe_fidelity(profile, *, radius_m: float, depth_m: float, background: str 
         got = np.array(found.get(k, []), dtype=float).reshape(-1, 3)
         shares = np.zeros(len(c))
         if got.size:
-            near = ((np.abs(got[None, :, 0] - c[:, None, 0]) <= r + 3.0)
+            near = ((np.abs(got[None, :, 0] - c[:, None, 0]) <= r + 3.0 + 0.25 * abs(dx))
                     & (np.abs(got[None, :, 1] - c[:, None, 1]) <= 0.25 * length + 3.0))
             hits += int(near.any(axis=1).sum())
             shares = (near * got[None, :, 2]).sum(axis=1)
