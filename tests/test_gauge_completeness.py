@@ -533,31 +533,48 @@ def test_canvas_without_the_linear_copies_gives_the_same_8bit_canvas(volume):
 def test_canvas_rounds_a_faint_streak_once_and_keeps_the_pixels_noise(volume):
     """A linear camera rounds each pixel once.  Frame n's 8-bit copy was rounded already;
     the canvas draws the value within the code's rounding interval before rounding the
-    streak again, so a faint streak's mean change is its Eq. (17) change (rounded twice it
-    would be a whole number of gray levels at every pixel).  Over a noisy background the
-    streak pixels keep the frame's noise (I_b + beta (E_r - I_b) alone keeps 1 - beta of
-    it)."""
+    streak again, so a faint streak changes the codes as the camera would have: on average
+    by its Eq. (17) change (rounded twice it would be a whole number of gray levels at
+    every pixel), and less where the pixel's noise had rounded it up (its value lay in the
+    lower part of the code's interval, as the neighbour frames say) than where it had
+    rounded it down (drawn uniformly in the interval, as often either way).  Over a noisy
+    background the streak pixels keep the frame's noise (I_b + beta (E_r - I_b) alone
+    keeps 1 - beta of it)."""
     M, N = CAM.shape
     probe = _probe(volume, per_frame=16, seed=4)
+    rng = np.random.default_rng(3)
     flat = np.full(CAM.shape, 100.0, np.float32)
-    diff_raw, diff_true = [], []
-    for _ in range(6):
+    got, want, up = [], [], []
+    for _ in range(12):
         plan = probe.plan(CAM.shape, slope=0.0)
         # the streaks' exact change at E_r = 110 over a flat background: under a gray level
         exact, _r, _c = probe.canvas((flat, flat, flat), plan, 110.0)
-        change = exact[1] - flat[0, 0]
-        raws = tuple(np.full(CAM.shape, 100, np.uint8) for _ in range(3))
-        lin, raw, _c = probe.canvas((flat, flat, flat), plan, 110.0, raws=raws, delinearize=CAM.delinearize)
+        change = exact[1] - 100.0
+        # the camera's three frames at 1 gray level of noise, and frame n with the streaks
+        # as the camera makes it (the same noise, rounded once)
+        x = 100.0 + rng.standard_normal((3, M, N))
+        raws = tuple(np.rint(f).astype(np.uint8) for f in x)
+        lin, raw, _c = probe.canvas(tuple(r.astype(np.float32) for r in raws), plan, 110.0, raws=raws,
+                                    delinearize=CAM.delinearize, noise_dn=1.0)
+        # frame n's noisy values where the canvas holds its crops
+        x1 = np.zeros(change.shape)
+        for p in plan:
+            (cx, cy, cw, ch), (bx, by) = p["canvas_box"], p["box"][:2]
+            x1[cy:cy + ch, cx:cx + cw] = x[1][by:by + ch, bx:bx + cw]
+        code = np.rint(x1)
         # the pixels whose change is under half a gray level: rounded twice they would not
         # change at all
         on = (change > 0.05) & (change < 0.5)
-        diff_raw.append(raw[1][on].astype(float) - 100.0)
-        diff_true.append(change[on])
-    got, want = np.concatenate(diff_raw), np.concatenate(diff_true)
-    assert got.size > 2000
-    assert 0.15 < want.mean() < 0.5 and not np.round(want).any()
+        got.append(raw[1][on].astype(float) - code[on])
+        want.append(np.rint(x1[on] + change[on]) - code[on])
+        up.append(code[on] > 0.5 * (raw[0][on].astype(float) + raw[2][on]))
+        assert np.array_equal(lin[1], raw[1].astype(np.float32))
+    got, want, up = np.concatenate(got), np.concatenate(want), np.concatenate(up)
+    assert got.size > 4000 and 0.15 < want.mean() < 0.5
     assert got.mean() == pytest.approx(want.mean(), abs=0.03)
-    assert np.array_equal(lin[1], raw[1].astype(np.float32))
+    assert want[up].mean() < want[~up].mean() - 0.1
+    assert got[up].mean() == pytest.approx(want[up].mean(), abs=0.04)
+    assert got[~up].mean() == pytest.approx(want[~up].mean(), abs=0.04)
 
     # the noise of the pixels under the streak, with beta as large as a slow drop's
     rng = np.random.default_rng(8)
