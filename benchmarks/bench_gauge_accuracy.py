@@ -247,6 +247,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-replay", action="store_true")
     ap.add_argument("--no-matrix", action="store_true")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--matrix-seeds", action="store_true",
+                    help="seed each clip as in the full matrix (a subset reruns the same clips)")
     args = ap.parse_args(argv)
 
     from raingauge.profile import default_profile
@@ -288,8 +290,12 @@ def main(argv=None) -> int:
               + (f", every {args.drop_every}th frame dropped" if args.drop_every else ""))
         print(f"{'rate':>6} {'background':>15} {'noise':>5} {'wind':>4} {'dsd':>15} | {'true':>8} {'meas':>8} "
               f"{'ratio':>6} {'ci95':>17} {'cov':>3} {'n':>5} {'sd%':>5} {'Dm_t':>5} {'Dm_m':>5} {'fps':>5} flags")
+        # a clip's seed is its place in the list; with --matrix-seeds its place in the full
+        # matrix, so that a subset reruns the full matrix's own clips
+        full = list(itertools.product(RATES, BACKGROUNDS, NOISES, WINDS, DSDS))
+        places = [full.index(c) if args.matrix_seeds and c in full else k for k, c in enumerate(combos)]
         jobs = [(k, rate, bg, noise, wind, dsd, (w, h), args.seconds, args.seed, args.gauge_law, args.drop_every)
-                for k, (rate, bg, noise, wind, dsd) in enumerate(combos)]
+                for k, (rate, bg, noise, wind, dsd) in zip(places, combos)]
         for line, row in _ordered(_clip_row, jobs, args.jobs):
             rows.append(row)
             print(line, flush=True)

@@ -747,3 +747,60 @@ def test_probe_counts_its_drops_as_the_gauge_counts_the_same_drops_in_the_video(
     (m_real, se_real), (m_prb, se_prb) = res["real_share"], res["probe_share"]
     assert m_real > 0 and m_prb > 0
     assert abs(m_real - m_prb) < 4.0 * math.hypot(se_real, se_prb)
+
+
+def test_drift_is_corrected_by_what_the_gauge_makes_of_the_probes():
+    """A drop's drift is measured as its slant times its speed at the depth of its measured
+    size, so a size measured small drifts slow.  The probe's counted drops, placed with a
+    known drift, tell what the gauge makes of one, class by class of measured size; the
+    counted drops' drift is divided by it drop by drop (their own class where it has
+    enough probe drops, else all of them), within the span it is held to."""
+    from raingauge.gauge.gauge import PROBE_DRIFT_BIAS_SPAN, PROBE_DRIFT_MIN_DROPS
+
+    g = RainGauge(CAM, window_s=8.0, step_s=8.0, velocity_model="gunn_kinzer")
+    mid = np.sqrt(CLASS_EDGES_M[:-1] * CLASS_EDGES_M[1:])
+    small, large = float(mid[1]), float(mid[4])
+    g._drifts.extend([2.88] * 30 + [3.0] * 20)
+    g._drift_radii.extend([small] * 30 + [large] * 20)
+    assert g._counted_drift() == pytest.approx(2.88)
+    g._probe_drift_ratios[1].extend([0.96] * PROBE_DRIFT_MIN_DROPS)
+    g._probe_drift_ratios[4].extend([1.0] * PROBE_DRIFT_MIN_DROPS)
+    assert g._counted_drift() == pytest.approx(3.0)
+    # a class with too few probe drops takes the median of all of them
+    g._probe_drift_ratios[4].clear()
+    g._probe_drift_ratios[4].extend([1.0] * (PROBE_DRIFT_MIN_DROPS - 1))
+    np.testing.assert_allclose(g._probe_drift_bias([small, large]), [0.96, float(np.median(
+        [0.96] * PROBE_DRIFT_MIN_DROPS + [1.0] * (PROBE_DRIFT_MIN_DROPS - 1)))])
+    # held to its span
+    g._probe_drift_ratios[1].extend([0.5] * 60)
+    assert g._probe_drift_bias([small])[0] == PROBE_DRIFT_BIAS_SPAN[0]
+
+
+def test_probe_drops_drift_as_placed_and_are_placed_with_the_corrected_drift():
+    """In a 3 m/s cross wind the probe's counted drops read about the drift they were
+    placed with; once they have, and drops were counted, later drops are placed with the
+    counted drops' drift corrected by them, which reads the wind."""
+    sim = pytest.importorskip("raingauge.render.simulator")
+    cam = CAM.replace(noise_sigma_dn=1.0)
+    frames, _truth = sim.render_clip(cam, seconds=18.0, rain_rate_mm_h=30.0, seed=4, background="ramp:150:190",
+                                     drop_brightness_dn=250.0, wind_m_s=3.0)
+    # (the drops wait for the probe to mature and E_r to be known: counted here from 14 s on)
+    g = RainGauge(cam, window_s=12.0, step_s=12.0, velocity_model="gunn_kinzer")
+    placed = []
+    plan = g.probe.plan
+
+    def spy(shape, slope, drift_m_s=None):
+        if sum(len(d) for d in g._probe_drift_ratios) >= 40 and g._counted_direction() and len(g._drifts) >= 5:
+            placed.append((drift_m_s, g._counted_drift()))
+        return plan(shape, slope, drift_m_s=drift_m_s)
+
+    g.probe.plan = spy
+    for fr in frames:
+        g.process(fr)
+    ratios = np.concatenate([list(d) for d in g._probe_drift_ratios])
+    assert ratios.size >= 40
+    assert np.median(ratios) == pytest.approx(1.0, abs=0.05)
+    assert placed
+    for used, corrected in placed:
+        assert used == pytest.approx(corrected, rel=1e-12)
+    assert g._wind_m_s() == pytest.approx(3.0, abs=0.08)

@@ -944,6 +944,7 @@ def test_rain_direction_comes_from_the_search_along_all_directions():
     assert g._rain_slope() == 0.0 and g._wind_m_s() == 0.0
     g._slopes.extend([0.02, -0.01, 0.05, 0.0, 0.03, 0.01])   # counted upright
     g._drifts.extend([0.1, 0.0, 0.2, 0.1, 0.1, 0.0])
+    g._drift_radii.extend([1e-3] * 6)                         # (each at its measured radius)
     assert g._rain_slope() == pytest.approx(0.015)           # their median: nothing contradicts it yet
     g._law_slopes.extend([0.62, 0.58, 0.7, 0.6, 0.64])
     g._law_drifts.extend([3.1, 2.9, 3.0, 3.2, 2.8])           # the search drifts otherwise
@@ -951,6 +952,7 @@ def test_rain_direction_comes_from_the_search_along_all_directions():
     assert g._wind_m_s() == pytest.approx(3.0)
     g._slopes.extend([0.7] * 50)                              # counted along the slant: agree
     g._drifts.extend([2.2] * 50)
+    g._drift_radii.extend([1e-3] * 50)
     lo, share = gg.DIRECTION_DRIFT_AGREEMENT
     assert abs(2.2 - 3.0) <= max(lo, share * 3.0)
     assert g._rain_slope() == pytest.approx(0.7)
@@ -970,6 +972,7 @@ def test_counted_drift_beyond_the_searchs_gives_the_direction():
     g._law_drifts.extend([0.5, 0.2, -0.9, -1.8, 0.8, 1.0, -0.2, 0.3])   # noise streaks
     g._slopes.extend([0.55, 0.6, 0.62, 0.58, 0.64, 0.57])
     g._drifts.extend([2.8, 3.0, 2.9, 3.1, 2.7, 2.95])
+    g._drift_radii.extend([1e-3] * 6)
     assert g._counted_direction()
     assert g._rain_slope() == pytest.approx(0.59)
     assert g._wind_m_s() == pytest.approx(2.925)
@@ -977,6 +980,7 @@ def test_counted_drift_beyond_the_searchs_gives_the_direction():
     g._law_drifts.extend([3.0] * 50)
     g._slopes.extend([0.01] * 50)                           # the counted ones were held upright
     g._drifts.extend([0.1] * 50)
+    g._drift_radii.extend([1e-3] * 50)
     assert not g._counted_direction()
     assert g._rain_slope() == pytest.approx(0.6)
 
