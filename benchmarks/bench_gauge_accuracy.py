@@ -22,10 +22,14 @@ clip per rate and background (noise, wind and DSD cycled), ``--rates``,
 ``--backgrounds``, ``--noises``, ``--winds`` and ``--dsds`` pick subsets,
 ``--size`` and ``--seconds`` shrink the clips, ``--jobs N`` runs the clips in N
 processes (rows print in matrix order), ``--replay-minutes`` and
-``--replay-size`` shorten and shrink the replay.
+``--replay-size`` shorten and shrink the replay.  A clip's seed is its place in
+the list of clips run; with ``--matrix-seeds`` its place in the full matrix, so
+that a subset reruns the full matrix's own clips (two versions of the gauge
+compared clip by clip on a subset, or a subset against a full run).
 
     python benchmarks/bench_gauge_accuracy.py --quick --size 640x360 --seconds 60
     python benchmarks/bench_gauge_accuracy.py --jobs 8 --no-replay          # the full matrix
+    python benchmarks/bench_gauge_accuracy.py --jobs 2 --no-replay --winds 3 --dsds gamma3 --matrix-seeds
     python benchmarks/bench_gauge_accuracy.py --no-matrix --replay-size 320x180
 """
 
