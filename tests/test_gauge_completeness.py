@@ -776,6 +776,36 @@ def test_drift_is_corrected_by_what_the_gauge_makes_of_the_probes():
     assert g._probe_drift_bias([small])[0] == PROBE_DRIFT_BIAS_SPAN[0]
 
 
+def test_drift_test_rejects_streaks_that_move_across_otherwise():
+    """In a cross wind every drop drifts with the air, so a whole streak of a drop near focus
+    moves across by u f T / z0; a piece of a far drop's streak, detected where the noise
+    lifts it, moves across by the piece's share.  The test is off without wind and until
+    enough drops were counted, and holds the counted drops' measured drift within its
+    tolerance."""
+    from raingauge.gauge.gauge import DRIFT_TEST_MIN_DROPS, DRIFT_TOL_PX, DRIFT_TOL_REL
+
+    g = RainGauge(CAM, velocity_model="gunn_kinzer")
+    dx_e = 3.0 * CAM.focal_length_px * CAM.exposure_s / CAM.focus_distance_m   # 33.6 px
+    share = np.array([1.0, 0.9, 1.15, 0.7, 0.5, 0.0, -1.0])
+    assert g._drift_consistent(share * dx_e).all()                 # no wind
+    g._slopes.extend([0.6] * (DRIFT_TEST_MIN_DROPS - 1))
+    g._drifts.extend([3.0] * (DRIFT_TEST_MIN_DROPS - 1))
+    g._drift_radii.extend([1e-3] * (DRIFT_TEST_MIN_DROPS - 1))
+    assert g._wind_m_s() == pytest.approx(3.0)
+    assert g._drift_consistent(share * dx_e).all()                 # too few drops counted
+    g._slopes.append(0.6)
+    g._drifts.append(3.0)
+    g._drift_radii.append(1e-3)
+    np.testing.assert_array_equal(g._drift_consistent(share * dx_e),
+                                  [True, True, True, False, False, False, False])
+    tol = DRIFT_TOL_REL * dx_e + DRIFT_TOL_PX
+    np.testing.assert_array_equal(g._drift_consistent([dx_e + 0.99 * tol, dx_e - 1.01 * tol]), [True, False])
+    # the drift compared with is the counted drops' measured one, not the corrected one
+    g._probe_drift_ratios[3].extend([0.9] * 60)
+    assert g._wind_m_s() == pytest.approx(3.0 / 0.9)
+    assert g._drift_consistent([dx_e])[0]
+
+
 def test_probe_drops_drift_as_placed_and_are_placed_with_the_corrected_drift():
     """In a 3 m/s cross wind the probe's counted drops read about the drift they were
     placed with; once they have, and drops were counted, later drops are placed with the
