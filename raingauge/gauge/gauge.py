@@ -1247,9 +1247,10 @@ class RainGauge:
         detected where the noise lifts it, is short and narrow like a near small drop's and
         passes the law, but moves across by the piece's share of the drop's motion.  Over the
         bright sky at 3 gray levels and 2 mm/h in 3 m/s, drops more than 10 cm from focus
-        (beyond the depths the probe places its drops at) gave 37 % of the law-abiding
-        streaks, 26 % without wind; theirs moved across 0.43-1.01 of the drift (10th to 90th
-        percentile, median 0.68), the whole streaks of drops within 3 cm of focus 0.89-1.08.
+        (the probe places drops of radius 0.6 mm within 12 cm of it) gave 37 % of the
+        law-abiding streaks, 26 % without wind; theirs moved across 0.43-1.01 of the drift
+        (10th to 90th percentile, median 0.68), the whole streaks of drops within 3 cm of
+        focus 0.89-1.08.
         Their low focus q' pulled the drop brightness E_r 2-5 gray levels low and the rate
         high.  The drift compared with is the counted drops' measured median (the streak's
         own measure has the same bias); their drifts are logged before this test, so it does
