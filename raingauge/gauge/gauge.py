@@ -299,8 +299,8 @@ PROBE_DRIFT_MIN_DROPS = 15
 PROBE_DRIFT_MIN_M_S = 0.3
 PROBE_DRIFT_BIAS_SPAN = (0.8, 1.25)
 #: The drift test in a cross wind (:meth:`RainGauge._drift_consistent`): a streak's horizontal
-#: motion may differ from the one the drops' drift gives at the focus distance by this share
-#: of it [-] and these pixels [px] (33.6 +- 7 px in 3 m/s with the default camera; whole
+#: motion may fall short of the one the drops' drift gives at the focus distance by this
+#: share of it [-] and these pixels [px] (33.6 - 7 px in 3 m/s with the default camera; whole
 #: streaks of drops within 3 cm of focus moved 0.89-1.08 of it, 10th to 90th percentile, at
 #: 2 mm/h over the bright sky at 3 gray levels); and the counted drops' drifts it needs [-].
 DRIFT_TOL_REL = 0.15
@@ -1237,7 +1237,7 @@ class RainGauge:
         return np.clip(by_class[k], lo, hi)
 
     def _drift_consistent(self, dx_px) -> np.ndarray:
-        """Whether each streak's horizontal motion ``dx_px`` [px] is the drops' drift's
+        """Whether each streak's horizontal motion ``dx_px`` [px] reaches the drops' drift's
         (bool array; all True with no wind, or before :data:`DRIFT_TEST_MIN_DROPS` drops
         were counted in it).
 
@@ -1252,16 +1252,20 @@ class RainGauge:
         (10th to 90th percentile, median 0.68), the whole streaks of drops within 3 cm of
         focus 0.89-1.08.
         Their low focus q' pulled the drop brightness E_r 2-5 gray levels low and the rate
-        high.  The drift compared with is the counted drops' measured median (the streak's
-        own measure has the same bias); their drifts are logged before this test, so it does
-        not feed itself."""
+        high.  The test is one-sided: a piece falls short, while a whole streak of a drop
+        nearer than focus moves further, u f T / z, and its defocus is the velocity law's
+        and the photometric test's to judge, as the model of the sample volume expects (on
+        32 clips in 3 m/s, Marshall-Palmer rain of 2-100 mm/h, 28 were within 15 % tested
+        one way, 26 both ways, 27 untested).  The drift compared with is the counted drops' measured
+        median (the streak's own measure has the same bias); their drifts are logged before
+        this test, so it does not feed itself."""
         dx = np.asarray(dx_px, dtype=float)
         if self._wind_m_s() == 0.0 or len(self._drifts) < DRIFT_TEST_MIN_DROPS:
             return np.ones(dx.shape, bool)
         prof = self.profile
         dx_e = float(np.median(self._drifts)) * prof.focal_length_px * prof.exposure_s / prof.focus_distance_m
         with np.errstate(invalid="ignore"):
-            return np.abs(dx - dx_e) <= DRIFT_TOL_REL * abs(dx_e) + DRIFT_TOL_PX
+            return math.copysign(1.0, dx_e) * (dx - dx_e) >= -(DRIFT_TOL_REL * abs(dx_e) + DRIFT_TOL_PX)
 
     def _run_probe(self, frames, raws, slope, vol, t, frame_streaks, *, ref_bg, contrast, hist,
                    noise_dn) -> None:
