@@ -31,6 +31,7 @@ compared clip by clip on a subset, or a subset against a full run).
     python benchmarks/bench_gauge_accuracy.py --jobs 8 --no-replay          # the full matrix
     python benchmarks/bench_gauge_accuracy.py --jobs 2 --no-replay --winds 3 --dsds gamma3 --matrix-seeds
     python benchmarks/bench_gauge_accuracy.py --no-matrix --replay-size 320x180
+    python benchmarks/bench_gauge_accuracy.py --summarize full.txt winds3_rerun.txt
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import math
+import re
 import sys
 import time
 from pathlib import Path
@@ -196,12 +198,115 @@ def _clip_row(job):
     n_frames = int(round(seconds * profile.frame_rate_hz))
     # the rate's statistical standard uncertainty: its counting and the probe's sampling
     stat = math.hypot(*(rec[k] or 0.0 for k in ("rain_rate_counting_rsd", "rain_rate_probe_rsd")))
-    line = (f"{rate:6.1f} {bg:>15} {noise:5.1f} {wind:4.1f} {dsd:>15} | {true:8.3f} {meas:8.3f} "
-            f"{meas / true if true > 0 else float('nan'):6.3f} [{lo:7.3f},{hi:8.3f}] {'y' if cov else 'n':>3} "
-            f"{rec['drops_counted']:5d} {100 * stat:5.1f} {dm_t:5.2f} {dm_m:5.2f} {n_frames / elapsed:5.1f} "
-            f"{','.join(rec['quality'])}")
-    return line, dict(rate=rate, bg=bg, noise=noise, dsd=dsd, wind=wind, true=true, meas=meas, cov=cov, dm_t=dm_t,
-                      dm_m=dm_m, stat=stat)
+    row = dict(rate=rate, bg=bg, noise=noise, wind=wind, dsd=dsd, true=true, meas=meas, lo=lo, hi=hi, cov=cov,
+               n=int(rec["drops_counted"]), stat=stat, dm_t=dm_t, dm_m=dm_m, fps=n_frames / elapsed,
+               flags=",".join(rec["quality"]))
+    return format_row(row), row
+
+
+def format_row(r: dict) -> str:
+    """A clip's printed row (``parse_output`` reads it back)."""
+    ratio = r["meas"] / r["true"] if r["true"] > 0 else float("nan")
+    return (f"{r['rate']:6.1f} {r['bg']:>15} {r['noise']:5.1f} {r['wind']:4.1f} {r['dsd']:>15} | {r['true']:8.3f} "
+            f"{r['meas']:8.3f} {ratio:6.3f} [{r['lo']:7.3f},{r['hi']:8.3f}] {'y' if r['cov'] else 'n':>3} "
+            f"{r['n']:5d} {100 * r['stat']:5.1f} {r['dm_t']:5.2f} {r['dm_m']:5.2f} {r['fps']:5.1f} {r['flags']}")
+
+
+_ROW = re.compile(
+    r"^\s*(?P<rate>[\d.]+)\s+(?P<bg>\S+)\s+(?P<noise>[\d.]+)\s+(?P<wind>[\d.]+)\s+(?P<dsd>\S+)\s+\|"
+    r"\s+(?P<true>\S+)\s+(?P<meas>\S+)\s+\S+\s+\[\s*(?P<lo>\S+),\s*(?P<hi>\S+)\]\s+(?P<cov>[yn])"
+    r"\s+(?P<n>\d+)\s+(?P<sd>\S+)\s+(?P<dm_t>\S+)\s+(?P<dm_m>\S+)\s+(?P<fps>\S+)\s*(?P<flags>\S*)\s*$")
+_FREE = re.compile(r"^\s*(?P<name>\w+): (?P<rate>\S+) mm/h\s+drops")
+
+
+def parse_output(text: str) -> tuple[list[dict], list[float]]:
+    """The clips' rows and the rain-free rates of a printed run (``--summarize`` reads saved runs).
+
+    The printed figures carry 3 decimals (the rate) and 1 (the statistical sd), so a
+    summary of a saved run agrees with the run's own to that rounding.
+    """
+    rows, free = [], []
+    for line in text.splitlines():
+        m = _ROW.match(line)
+        if m:
+            g = m.groupdict()
+            rows.append(dict(rate=float(g["rate"]), bg=g["bg"], noise=float(g["noise"]), wind=float(g["wind"]),
+                             dsd=g["dsd"], true=float(g["true"]), meas=float(g["meas"]), lo=float(g["lo"]),
+                             hi=float(g["hi"]), cov=g["cov"] == "y", n=int(g["n"]), stat=float(g["sd"]) / 100,
+                             dm_t=float(g["dm_t"]), dm_m=float(g["dm_m"]), fps=float(g["fps"]), flags=g["flags"]))
+            continue
+        m = _FREE.match(line)
+        if m and m["name"] in RAIN_FREE:
+            free.append(float(m["rate"]))
+    return rows, free
+
+
+def within_target(r: dict) -> bool:
+    """The clip's rate within its target: 15 % from 2 mm/h on, 0.2 mm/h below."""
+    if r["true"] >= 2.0:
+        return abs(r["meas"] / r["true"] - 1) <= 0.15
+    return abs(r["meas"] - r["true"]) <= 0.2
+
+
+def summary_lines(rows: list[dict], free: list[float]) -> list[str]:
+    """The summary against the targets (target in brackets)."""
+    out = ["# summary (target in brackets)"]
+    big = [r for r in rows if r["true"] >= 2.0]
+    small = [r for r in rows if r["true"] < 2.0]
+    if big:
+        err = np.array([abs(r["meas"] / r["true"] - 1) for r in big])
+        out.append(f"rates >= 2 mm/h: {len(big)} clips, median |error| {100 * np.median(err):.1f} % [<= 5 %], "
+                   f"max {100 * err.max():.1f} % [<= 15 %], within 15 %: {np.mean(err <= 0.15) * 100:.0f} %")
+        # each miss against the rate's own statistical uncertainty (counting and probe):
+        # beyond about 2.5 of it the miss is a bias, not the luck of the draw
+        for r, e in zip(big, err):
+            if e > 0.15:
+                z = (r["meas"] / r["true"] - 1) / r["stat"] if r["stat"] > 0 else float("nan")
+                out.append(f"  beyond 15 %: {r['rate']:g} mm/h {r['bg']} noise {r['noise']:g} wind {r['wind']:g} "
+                           f"{r['dsd']}: {r['meas'] / r['true']:.3f}, statistical sd {100 * r['stat']:.1f} %, "
+                           f"{z:+.1f} sd")
+    if small:
+        err = np.array([abs(r["meas"] - r["true"]) for r in small])
+        out.append(f"rates < 2 mm/h: {len(small)} clips, max |error| {err.max():.3f} mm/h [<= 0.2], "
+                   f"within 0.2: {np.mean(err <= 0.2) * 100:.0f} %")
+    for wind in sorted({r["wind"] for r in rows}):
+        sel = [r["meas"] / r["true"] for r in rows if r["wind"] == wind and r["true"] >= 2.0
+               and r["bg"] == "dark_uniform"]
+        if sel:
+            out.append(f"dark background, rates >= 2 mm/h, wind {wind:g} m/s: median measured/true "
+                       f"{np.median(sel):.3f} over {len(sel)} clips")
+    if rows:
+        out.append(f"95 % interval covers the truth: {np.mean([r['cov'] for r in rows]) * 100:.0f} % [>= 90 %]")
+        dm = np.array([abs(r["dm_m"] / r["dm_t"] - 1) for r in rows if np.isfinite(r["dm_m"])])
+        if dm.size:
+            out.append(f"Dm: median |error| {100 * np.median(dm):.1f} %, within 10 %: "
+                       f"{np.mean(dm <= 0.1) * 100:.0f} % [all]")
+    if free:
+        out.append(f"rain-free: max {max(free):.4f} mm/h [< 0.05]")
+    return out
+
+
+def table_lines(rows: list[dict]) -> list[str]:
+    """Per background and noise (rows) and rate (columns): clips within target of those run, and the
+    range of measured/true; markdown, as the README's table."""
+    rates = sorted({r["rate"] for r in rows})
+    keys = sorted({(r["bg"], r["noise"]) for r in rows},
+                  key=lambda k: (list(BACKGROUNDS).index(k[0]) if k[0] in BACKGROUNDS else len(BACKGROUNDS), k[1]))
+    out = ["| background, noise | " + " | ".join(f"{r:g} mm/h" for r in rates) + " |",
+           "|---|" + "---|" * len(rates)]
+    for bg, noise in keys:
+        cells = []
+        for rate in rates:
+            sel = [r for r in rows if r["bg"] == bg and r["noise"] == noise and r["rate"] == rate]
+            if not sel:
+                cells.append("")
+                continue
+            ratios = [r["meas"] / r["true"] for r in sel if r["true"] > 0]
+            ok = sum(within_target(r) for r in sel)
+            rng = f" ({min(ratios):.2f}-{max(ratios):.2f})" if ratios else ""
+            cells.append(f"{ok}/{len(sel)}{rng}")
+        out.append(f"| {bg.replace('_', ' ')}, {noise:g} | " + " | ".join(cells) + " |")
+    return out
 
 
 def _free_row(job):
@@ -253,7 +358,12 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--matrix-seeds", action="store_true",
                     help="seed each clip as in the full matrix (a subset reruns the same clips)")
+    ap.add_argument("--summarize", nargs="+", metavar="FILE",
+                    help="run nothing: the summary and table of saved runs' printed output (a clip run again "
+                         "in a later file replaces the earlier)")
     args = ap.parse_args(argv)
+    if args.summarize:
+        return summarize(args.summarize)
 
     from raingauge.profile import default_profile
 
@@ -310,45 +420,40 @@ def main(argv=None) -> int:
         for line, rate in _ordered(_free_row, jobs, args.jobs):
             free.append(rate)
             print(line, flush=True)
-        # summary
-        print("# summary (target in brackets)")
-        big = [r for r in rows if r["true"] >= 2.0]
-        small = [r for r in rows if r["true"] < 2.0]
-        if big:
-            err = np.array([abs(r["meas"] / r["true"] - 1) for r in big])
-            print(f"rates >= 2 mm/h: {len(big)} clips, median |error| {100 * np.median(err):.1f} % [<= 5 %], "
-                  f"max {100 * err.max():.1f} % [<= 15 %], within 15 %: {np.mean(err <= 0.15) * 100:.0f} %")
-            # each miss against the rate's own statistical uncertainty (counting and probe):
-            # beyond about 2.5 of it the miss is a bias, not the luck of the draw
-            for r, e in zip(big, err):
-                if e > 0.15:
-                    z = (r["meas"] / r["true"] - 1) / r["stat"] if r["stat"] > 0 else float("nan")
-                    print(f"  beyond 15 %: {r['rate']:g} mm/h {r['bg']} noise {r['noise']:g} wind {r['wind']:g} "
-                          f"{r['dsd']}: {r['meas'] / r['true']:.3f}, statistical sd {100 * r['stat']:.1f} %, "
-                          f"{z:+.1f} sd")
-        if small:
-            err = np.array([abs(r["meas"] - r["true"]) for r in small])
-            print(f"rates < 2 mm/h: {len(small)} clips, max |error| {err.max():.3f} mm/h [<= 0.2], "
-                  f"within 0.2: {np.mean(err <= 0.2) * 100:.0f} %")
-        for wind in sorted({r["wind"] for r in rows}):
-            sel = [r["meas"] / r["true"] for r in rows if r["wind"] == wind and r["true"] >= 2.0
-                   and r["bg"] == "dark_uniform"]
-            if sel:
-                print(f"dark background, rates >= 2 mm/h, wind {wind:g} m/s: median measured/true "
-                      f"{np.median(sel):.3f} over {len(sel)} clips")
-        if rows:
-            print(f"95 % interval covers the truth: {np.mean([r['cov'] for r in rows]) * 100:.0f} % [>= 90 %]")
-            dm = np.array([abs(r["dm_m"] / r["dm_t"] - 1) for r in rows if np.isfinite(r["dm_m"])])
-            if dm.size:
-                print(f"Dm: median |error| {100 * np.median(dm):.1f} %, within 10 %: {np.mean(dm <= 0.1) * 100:.0f} % "
-                      f"[all]")
-        print(f"rain-free: max {max(free):.4f} mm/h [< 0.05]")
+        for line in summary_lines(rows, free) + ["# within target of the clips run (range of measured/true)"] \
+                + table_lines(rows):
+            print(line)
 
     if not args.no_replay and pf is not None:
         if args.replay_size:
             rw, rh = (int(v) for v in args.replay_size.lower().split("x"))
             profile = profile.replace(width_px=rw, height_px=rh)
         replay(profile, pf, minutes=args.replay_minutes, gauge_law=args.gauge_law, seed=args.seed)
+    return 0
+
+
+def summarize(paths) -> int:
+    """Print the summary and the table of saved runs (each clip once: the last file that ran it)."""
+    clips, free = {}, []
+    for path in paths:
+        try:
+            text = Path(path).read_text()
+        except OSError as exc:
+            print(f"error: cannot read {path}: {exc.strerror}; pass the file a run's stdout was saved to",
+                  file=sys.stderr)
+            return 2
+        rows, f = parse_output(text)
+        if not rows and not f:
+            print(f"error: {path} holds no clip rows of bench_gauge_accuracy.py; pass a run's saved stdout",
+                  file=sys.stderr)
+            return 2
+        clips.update({(r["rate"], r["bg"], r["noise"], r["wind"], r["dsd"]): r for r in rows})
+        free = f or free
+    rows = list(clips.values())
+    print(f"# {len(rows)} clips from {len(paths)} file(s)")
+    for line in summary_lines(rows, free) + ["# within target of the clips run (range of measured/true)"] \
+            + table_lines(rows):
+        print(line)
     return 0
 
 
