@@ -208,9 +208,9 @@ def run(rate, background, noise, wind, seconds, seed, size, *, given_brightness=
             real.append((c, t["a"][j], (t["z"][j] - near[j]) / max(far[j] - near[j], 1e-12), p,
                          (k, j) in found))
     if g.probe is not None:
-        injected, p_counted, p_expected = g.probe.class_counts()
+        _, p_counted, p_expected = g.probe.class_counts()
     else:
-        injected = p_counted = p_expected = np.zeros(n_cls)
+        p_counted = p_expected = np.zeros(n_cls)
     mixed = _probe_at_real_mix(g, vol, np.array(real, dtype=float).reshape(-1, 5), n_cls)
     print("\n class  a [mm]      real counted/expected         probe counted/expected       real/probe"
           "   probe at the real drops' mix   real/that")

@@ -321,8 +321,6 @@ def _focus_interval(profile, n, scene: Scene, focus_range):
 
 def _best_aperture_focus(profile, scene, fnum_range, focus_range, *, r_visible, a_ref_m, n_grid=96):
     """(G, N, z0) minimising G(f, N, z0) with the scene inside the depth of field, or None."""
-    from scipy.optimize import brentq
-
     pitch = _pitch(profile)
 
     def g_of(n, z0):

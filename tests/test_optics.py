@@ -264,13 +264,14 @@ def test_fig6_checkerboard_corners_eq7_vs_ray_tracer():
 
 
 def test_fig6_photometry_eq9_vs_ray_tracer():
-    # Fig. 6 II: the ball 9 in in front of a calibrated light box that fills its view
-    box_z, box_level = 9.0, 230.0
+    # Fig. 6 II: the ball 9 in in front of a calibrated light box that fills its view (a plane
+    # beyond the ball: only its radiance matters, the rays leaving forward all reach it)
+    box_level = 230.0
     npx, r_img = 121, 55.0
     o, d, _ = _ball_rays(npx, r_img, supersample=2)
 
     def light_box(oo, dd):
-        return np.where(dd[:, 2] > 0, box_level, 0.0)   # plane at box_z, radiance box_level
+        return np.where(dd[:, 2] > 0, box_level, 0.0)   # the box plane, radiance box_level
 
     def env(dirs):
         return np.where(dirs[..., 2] > 0, box_level, 0.0)

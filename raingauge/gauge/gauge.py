@@ -979,7 +979,6 @@ class RainGauge:
         labels, stats = detect_streaks(spike, c=self.c, smooth_px=self.smooth_px, slope=slope,
                                        slopes=self._frame_slopes, grow=vol.grow)
         rejected = 0
-        counted = []
         ref_bg = None
         contrast = None
         probing = (self.probe is not None and self._brightness_known(MATURE_BRIGHTNESS_SAMPLES) and
@@ -1695,7 +1694,6 @@ class RainGauge:
         """
         prof = self.profile
         f = prof.focal_length_px
-        z0 = prof.focus_distance_m
         T = prof.exposure_s
         counted = []
         rejected = 0

@@ -64,8 +64,6 @@ def run_prefilter(rises: list, falls: list) -> np.ndarray:
     its own rather than their union keeps noisy cameras, where one-sided
     changes of c are common, from flooding the run test.)
     """
-    import cv2
-
     R = dict(zip(range(-2, 3), rises))
     F = dict(zip(range(-2, 3), falls))
     pre = np.zeros_like(rises[2])
