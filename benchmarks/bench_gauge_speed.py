@@ -27,6 +27,7 @@ camera's queue takes up the start).  The target applies to the steady speed.
 
     python benchmarks/bench_gauge_speed.py --frames 360 --settle 120 --rates 0,10,50
     python benchmarks/bench_gauge_speed.py --frames 40 --settle 20 --backgrounds uniform:40
+    python benchmarks/bench_gauge_speed.py --rates 100 --backgrounds uniform:40 --wind 3
 """
 
 from __future__ import annotations
@@ -50,6 +51,9 @@ def main(argv=None) -> int:
     ap.add_argument("--rates", default="0,10,50", help="rain rates of the test clips [mm/h]")
     ap.add_argument("--backgrounds", default="skimage:brick,uniform:40",
                     help="simulator backgrounds of the test clips, comma-separated (one table each)")
+    ap.add_argument("--wind", type=float, default=0.0,
+                    help="cross wind of the test clips [m/s] (in wind the gauge also searches the rain's "
+                         "direction and tests each streak's drift)")
     args = ap.parse_args(argv)
     if not 0 < args.settle < args.frames:
         ap.error(f"--settle must be between 1 and --frames - 1 ({args.frames - 1}), got {args.settle}")
@@ -78,7 +82,7 @@ def main(argv=None) -> int:
           f"loaded): {time.process_time() - t0:.1f} s CPU (rendering them {t_render:.1f} s)")
     del warm, g
     print(f"# gauge speed at {w}x{h}, one core (cv2 threads {cv2.getNumThreads()}), {args.frames} frames per clip "
-          f"(start: the first {args.settle}; steady: the rest), CPU time; the gauge, the gauge without the probe "
+          f"(start: the first {args.settle}; steady: the rest), cross wind {args.wind:g} m/s, CPU time; the gauge, the gauge without the probe "
           f"and MOG2 take each frame in turn")
     for background in args.backgrounds.split(","):
         print(f"## background {background}")
@@ -86,7 +90,7 @@ def main(argv=None) -> int:
               f"{'probe every':>11} {'streaks/frame':>13} {'counted':>8}")
         for rate in (float(r) for r in args.rates.split(",")):
             frames, _truth = render_clip(profile, n_frames=args.frames, rain_rate_mm_h=rate, seed=7,
-                                         background=background)
+                                         background=background, wind_m_s=args.wind)
             gauge = RainGauge(profile, window_s=60.0, step_s=10.0, velocity_model="gunn_kinzer", keep_drops=True)
             # the same without the completeness probe (its share of the time)
             plain = RainGauge(profile, window_s=60.0, step_s=10.0, velocity_model="gunn_kinzer",
