@@ -785,10 +785,13 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
             s = cv2.blur(spike, (1, int(smooth_px)))
         else:
             s = cv2.filter2D(spike, -1, fall_kernel(int(smooth_px), slope), borderType=cv2.BORDER_REFLECT)
-        if smooth_px > 1:
+        if smooth_px > 1 and extra:
+            # (s is this call's own array: the largest is kept in place, one buffer for the rest)
+            buf = np.empty_like(s)
             for other in extra:
-                s = cv2.max(s, cv2.filter2D(spike, -1, fall_kernel(int(smooth_px), other),
-                                            borderType=cv2.BORDER_REFLECT))
+                cv2.filter2D(spike, -1, fall_kernel(int(smooth_px), other), dst=buf,
+                             borderType=cv2.BORDER_REFLECT)
+                cv2.max(s, buf, dst=s)
         mask = cv2.compare(s, float(c), cv2.CMP_GE)
         low = cv2.compare(s, float(c * grow), cv2.CMP_GE) if grow < 1.0 else None
     return _label_and_merge(mask, low, min_pixels=min_pixels, merge_gap_px=merge_gap_px, slope=slope,
