@@ -776,6 +776,29 @@ def test_drift_is_corrected_by_what_the_gauge_makes_of_the_probes():
     assert g._probe_drift_bias([small])[0] == PROBE_DRIFT_BIAS_SPAN[0]
 
 
+def test_the_wind_follows_every_sample_it_is_taken_from():
+    """The rain's direction and drift are kept between frames until a sample is added to the
+    logs they are taken from: the law-abiding streaks' while fewer than five drops were
+    counted, the counted drops' from then on, and a full log whose oldest sample gives way
+    to a new one reads the new median."""
+    g = RainGauge(CAM, velocity_model="gunn_kinzer")
+    assert (g._rain_slope(), g._wind_m_s()) == (0.0, 0.0)
+    g._law_slopes.extend([0.3] * 5)
+    g._law_drifts.extend([2.0] * 5)
+    assert (g._rain_slope(), g._wind_m_s()) == (0.3, 2.0)
+    g._law_drifts.extend([2.5] * 6)
+    assert g._wind_m_s() == 2.5
+    g._slopes.extend([0.4] * 5)
+    g._drifts.extend([2.6] * 5)
+    g._drift_radii.extend([1e-3] * 5)
+    assert g._counted_direction() and (g._rain_slope(), g._wind_m_s()) == (0.4, 2.6)
+    g._drifts.extend([2.8] * 50)                 # the logs are full: the 2.6s give way
+    g._drift_radii.extend([1e-3] * 50)
+    assert g._wind_m_s() == 2.8
+    g._slopes.extend([0.01] * 50)                # falling straight down in the image
+    assert (g._rain_slope(), g._wind_m_s()) == (0.01, 0.0)
+
+
 def test_drift_test_rejects_streaks_that_move_across_otherwise():
     """In a cross wind every drop drifts with the air, so a whole streak of a drop near focus
     moves across by u f T / z0; a piece of a far drop's streak, detected where the noise
