@@ -26,7 +26,10 @@ the script prints
   within the class, 4 of place within the depth span) weighted as the clip's own drops
   fall in them: where the difference stays, it is not the mix of sizes and depths
   within the class;
-* the rain of counted drops no drop of the clip explains (false detections).
+* the rain of counted drops no drop of the clip explains (false detections);
+* the counted rain of the matched drops nearer than, within and beyond the depth span
+  the model of the sample volume gives their true size (the probe places its drops
+  only within it).
 
 The count ratios carry the matching's own losses (a drop whose streak is cut by the
 frame edge or merged with another is not counted however good the gauge): compare
@@ -143,6 +146,7 @@ def run(rate, background, noise, wind, seconds, seed, size, *, given_brightness=
     # ---- counted drops against the drops they are
     found = set()
     rows = []            # (true radius, measured radius, rain [mm/h]); true radius NaN: unmatched
+    depths = []          # the matched drop's true depth [m] (NaN: unmatched)
     for d in g.drops:
         k = int(round(d["t"] * fps))
         contrib = 3.6e6 * math.pi / 6.0 * d["diameter_m"] ** 3 * d["velocity_m_s"] * d["weight_s_m3"] / seconds
@@ -150,7 +154,9 @@ def run(rate, background, noise, wind, seconds, seed, size, *, given_brightness=
         if j >= 0:
             found.add((k, j))
         rows.append((truth[k]["a"][j] if j >= 0 else math.nan, 0.5 * d["diameter_m"], contrib))
+        depths.append(truth[k]["z"][j] if j >= 0 else math.nan)
     rows = np.array(rows, dtype=float).reshape(-1, 3)
+    depths = np.array(depths, dtype=float)
     dmm = np.asarray(D.PARSIVEL_D_CENTRES_MM)
     nd = np.nan_to_num(np.asarray(tr["windows"][-1]["dsd_n_m3_mm"], dtype=float))
     v = np.nan_to_num(np.asarray(D.fall_velocity(dmm * 1e-3), dtype=float))
@@ -166,6 +172,16 @@ def run(rate, background, noise, wind, seconds, seed, size, *, given_brightness=
     lost = ~np.isfinite(rows[:, 0])
     print(f" unmatched counted drops: {int(lost.sum())}, {rows[lost, 2].sum():.3f} mm/h "
           f"({rows[lost, 2].sum() / true_rate:.1%} of the truth)")
+    # where the matched drops lay against the depth span the model of the sample volume
+    # gives their true size (the probe places its drops only within it)
+    span_vol = g.sample_volume(rec["quality"])
+    ok = ~lost
+    near, far = (np.asarray(x, dtype=float) for x in span_vol.depth_span(rows[ok, 0]))
+    z = depths[ok]
+    print(" counted rain by the true drop's depth against its size's depth span:")
+    for name, sel in (("nearer", z < near), ("within", (z >= near) & (z <= far)), ("beyond", z > far)):
+        print(f"   {name:7s} {int(sel.sum()):6d} drops  {rows[ok][sel, 2].sum():8.3f} mm/h "
+              f"({rows[ok][sel, 2].sum() / true_rate:.1%} of the truth)")
     # the spectrum the record gives is binned by the measured size: what lands in each band
     # of it, and how much of that is drops measured a quarter or more under their size
     print("\n meas. D [mm]  truth [mm/h]  gauge [mm/h]  ratio   drops  median D/D_m  from >= 1.25 D_m")
