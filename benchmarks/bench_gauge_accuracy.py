@@ -164,7 +164,7 @@ def run_clip(profile, *, seconds, rate, background, motion, e_r, noise, wind, ds
         recs += g.process(frame, t_s=k / prof.frame_rate_hz)
     recs += g.flush()
     elapsed = time.perf_counter() - t0
-    return recs, sim.truth, elapsed
+    return recs, sim.truth, elapsed, g.drop_brightness_estimate_dn
 
 
 def _clip_row(job):
@@ -180,8 +180,8 @@ def _clip_row(job):
 
         pf = read_parsivel(shared_parsivel())
     spec, motion, e_r = BACKGROUNDS[bg]
-    recs, truth, elapsed = run_clip(profile, seconds=seconds, rate=rate, background=spec, motion=motion,
-                                    e_r=e_r, noise=noise, wind=wind, dsd=dsd, pf=pf, seed=seed + k,
+    recs, truth, elapsed, e_est = run_clip(profile, seconds=seconds, rate=rate, background=spec, motion=motion,
+                                           e_r=e_r, noise=noise, wind=wind, dsd=dsd, pf=pf, seed=seed + k,
                                     gauge_law=gauge_law, drop_every=drop_every)
     rec = recs[-1]
     true = float(truth["rain_rate_mm_h"])
@@ -200,22 +200,28 @@ def _clip_row(job):
     stat = math.hypot(*(rec[k] or 0.0 for k in ("rain_rate_counting_rsd", "rain_rate_probe_rsd")))
     row = dict(rate=rate, bg=bg, noise=noise, wind=wind, dsd=dsd, true=true, meas=meas, lo=lo, hi=hi, cov=cov,
                n=int(rec["drops_counted"]), stat=stat, dm_t=dm_t, dm_m=dm_m, fps=n_frames / elapsed,
+               d_er=e_est - e_r, comp=rec["completed_share"] if rec["completed_share"] is not None else float("nan"),
                flags=",".join(rec["quality"]))
     return format_row(row), row
 
 
 def format_row(r: dict) -> str:
-    """A clip's printed row (``parse_output`` reads it back)."""
+    """A clip's printed row (``parse_output`` reads it back): ``dEr`` is the drop brightness
+    the gauge estimated less the simulator's [gray levels], ``comp%`` the share of the rate
+    completed below the smallest counted size (``completed_share``) [%]."""
     ratio = r["meas"] / r["true"] if r["true"] > 0 else float("nan")
     return (f"{r['rate']:6.1f} {r['bg']:>15} {r['noise']:5.1f} {r['wind']:4.1f} {r['dsd']:>15} | {r['true']:8.3f} "
             f"{r['meas']:8.3f} {ratio:6.3f} [{r['lo']:7.3f},{r['hi']:8.3f}] {'y' if r['cov'] else 'n':>3} "
-            f"{r['n']:5d} {100 * r['stat']:5.1f} {r['dm_t']:5.2f} {r['dm_m']:5.2f} {r['fps']:5.1f} {r['flags']}")
+            f"{r['n']:5d} {100 * r['stat']:5.1f} {r['dm_t']:5.2f} {r['dm_m']:5.2f} {r['fps']:5.1f} "
+            f"{r.get('d_er', float('nan')):5.1f} {100 * r.get('comp', float('nan')):5.1f} {r['flags']}")
 
 
 _ROW = re.compile(
     r"^\s*(?P<rate>[\d.]+)\s+(?P<bg>\S+)\s+(?P<noise>[\d.]+)\s+(?P<wind>[\d.]+)\s+(?P<dsd>\S+)\s+\|"
     r"\s+(?P<true>\S+)\s+(?P<meas>\S+)\s+\S+\s+\[\s*(?P<lo>\S+),\s*(?P<hi>\S+)\]\s+(?P<cov>[yn])"
-    r"\s+(?P<n>\d+)\s+(?P<sd>\S+)\s+(?P<dm_t>\S+)\s+(?P<dm_m>\S+)\s+(?P<fps>\S+)\s*(?P<flags>\S*)\s*$")
+    r"\s+(?P<n>\d+)\s+(?P<sd>\S+)\s+(?P<dm_t>\S+)\s+(?P<dm_m>\S+)\s+(?P<fps>\S+)"
+    # (runs saved before the drop brightness and completion columns lack them)
+    r"(?:\s+(?P<d_er>-?[\d.]+|nan)\s+(?P<comp>[\d.]+|nan))?\s*(?P<flags>\S*)\s*$")
 _FREE = re.compile(r"^\s*(?P<name>\w+): (?P<rate>\S+) mm/h\s+drops")
 
 
@@ -233,7 +239,8 @@ def parse_output(text: str) -> tuple[list[dict], list[float]]:
             rows.append(dict(rate=float(g["rate"]), bg=g["bg"], noise=float(g["noise"]), wind=float(g["wind"]),
                              dsd=g["dsd"], true=float(g["true"]), meas=float(g["meas"]), lo=float(g["lo"]),
                              hi=float(g["hi"]), cov=g["cov"] == "y", n=int(g["n"]), stat=float(g["sd"]) / 100,
-                             dm_t=float(g["dm_t"]), dm_m=float(g["dm_m"]), fps=float(g["fps"]), flags=g["flags"]))
+                             dm_t=float(g["dm_t"]), dm_m=float(g["dm_m"]), fps=float(g["fps"]), flags=g["flags"],
+                             d_er=float(g["d_er"] or "nan"), comp=float(g["comp"] or "nan") / 100))
             continue
         m = _FREE.match(line)
         if m and m["name"] in RAIN_FREE:
@@ -316,7 +323,7 @@ def _free_row(job):
 
     spec, motion = RAIN_FREE[name]
     profile = default_profile().replace(width_px=size[0], height_px=size[1])
-    recs, truth, elapsed = run_clip(profile, seconds=seconds, rate=0.0, background=spec, motion=motion,
+    recs, truth, elapsed, e_est = run_clip(profile, seconds=seconds, rate=0.0, background=spec, motion=motion,
                                     e_r=200.0, noise=3.0, wind=0.0, dsd="marshall_palmer", pf=None, seed=100 + k,
                                     gauge_law=gauge_law)
     rec = recs[-1]
@@ -403,7 +410,8 @@ def main(argv=None) -> int:
               f"gauge law {args.gauge_law}"
               + (f", every {args.drop_every}th frame dropped" if args.drop_every else ""))
         print(f"{'rate':>6} {'background':>15} {'noise':>5} {'wind':>4} {'dsd':>15} | {'true':>8} {'meas':>8} "
-              f"{'ratio':>6} {'ci95':>17} {'cov':>3} {'n':>5} {'sd%':>5} {'Dm_t':>5} {'Dm_m':>5} {'fps':>5} flags")
+              f"{'ratio':>6} {'ci95':>17} {'cov':>3} {'n':>5} {'sd%':>5} {'Dm_t':>5} {'Dm_m':>5} {'fps':>5} "
+              f"{'dEr':>5} {'comp%':>5} flags")
         # a clip's seed is its place in the list; with --matrix-seeds its place in the full
         # matrix, so that a subset reruns the full matrix's own clips
         full = list(itertools.product(RATES, BACKGROUNDS, NOISES, WINDS, DSDS))

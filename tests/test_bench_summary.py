@@ -20,10 +20,10 @@ def bench():
     return mod
 
 
-def _row(rate, bg, noise, wind, dsd, true, meas, *, flags="", hi=None, dm_m=1.0):
+def _row(rate, bg, noise, wind, dsd, true, meas, *, flags="", hi=None, dm_m=1.0, d_er=-1.2, comp=0.0):
     return dict(rate=rate, bg=bg, noise=noise, wind=wind, dsd=dsd, true=true, meas=meas, lo=0.8 * meas,
                 hi=1.2 * meas if hi is None else hi, cov=0.8 * meas <= true <= (1.2 * meas if hi is None else hi),
-                n=1234, stat=0.052, dm_t=1.00, dm_m=dm_m, fps=71.3, flags=flags)
+                n=1234, stat=0.052, dm_t=1.00, dm_m=dm_m, fps=71.3, d_er=d_er, comp=comp, flags=flags)
 
 
 ROWS = [
@@ -31,7 +31,8 @@ ROWS = [
     _row(0.5, "dark_uniform", 1.0, 3.0, "gamma3", 0.498, 0.250, flags="too_few_drops,low_contrast"),  # out
     _row(2.0, "dark_uniform", 1.0, 0.0, "parsivel", 1.750, 1.900),             # true < 2: 0.15 mm/h, in
     _row(2.0, "dark_uniform", 1.0, 3.0, "marshall_palmer", 2.210, 2.600),      # +17.6 %: out
-    _row(10.0, "bright_sky", 3.0, 0.0, "gamma3", 10.40, 11.50, hi=float("inf"), dm_m=float("nan")),  # +10.6 %
+    _row(10.0, "bright_sky", 3.0, 0.0, "gamma3", 10.40, 11.50, hi=float("inf"), dm_m=float("nan"),
+         d_er=float("nan"), comp=0.27),                                       # +10.6 %
     _row(10.0, "bright_sky", 3.0, 3.0, "gamma3", 10.40, 9.00),                 # -13.5 %: in
 ]
 
@@ -48,6 +49,24 @@ def test_saved_run_reads_back_as_printed(bench):
             assert got[key] == want[key], key
         for key in ("true", "meas", "lo", "hi", "stat", "dm_t", "dm_m"):
             assert got[key] == pytest.approx(want[key], abs=6e-4) or (math.isnan(got[key]) and math.isnan(want[key]))
+        if math.isnan(want["d_er"]):
+            assert math.isnan(got["d_er"])
+        else:
+            assert got["d_er"] == pytest.approx(want["d_er"], abs=0.05)
+        assert got["comp"] == pytest.approx(want["comp"], abs=6e-4)
+
+
+def test_runs_saved_before_the_brightness_and_completion_columns_still_read(bench):
+    """A row printed without the drop brightness error and the completed share (runs saved
+    before those columns) reads back with them NaN, flags and all."""
+    old = ("  10.0      bright_sky   3.0  3.0          gamma3 |   10.022   14.705  1.467 [  6.626,  26.797]   y"
+           "  2041   3.6  1.52  1.31  23.8 low_contrast")
+    (row,), _ = bench.parse_output(old)
+    assert (row["meas"], row["fps"], row["flags"]) == (14.705, 23.8, "low_contrast")
+    assert math.isnan(row["d_er"]) and math.isnan(row["comp"])
+    new = bench.format_row({**row, "d_er": -0.9, "comp": 0.27})
+    (again,), _ = bench.parse_output(new)
+    assert (again["d_er"], again["comp"], again["flags"]) == (-0.9, 0.27, "low_contrast")
 
 
 def test_table_counts_each_clip_against_its_own_target(bench):
