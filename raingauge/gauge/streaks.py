@@ -50,6 +50,7 @@ __all__ = [
     "measure_streak_table",
     "cap_offset_px",
     "detect_streaks",
+    "smoothed_spike",
     "measure_streaks",
     "chord_gauss_profile",
     "fit_cross_profile",
@@ -777,25 +778,34 @@ def detect_streaks(spike: np.ndarray, *, c: float = 3.0, smooth_px: int = 5, min
         mask = cv2.compare(s, float(c) * n_s, cv2.CMP_GE)
         low = cv2.compare(s, float(c * grow) * n_s, cv2.CMP_GE) if grow < 1.0 else None
     else:
-        if spike.dtype != np.float32:
-            spike = spike.astype(np.float32)
-        if smooth_px <= 1:
-            s = spike
-        elif abs(slope) < 0.05:
-            s = cv2.blur(spike, (1, int(smooth_px)))
-        else:
-            s = cv2.filter2D(spike, -1, fall_kernel(int(smooth_px), slope), borderType=cv2.BORDER_REFLECT)
-        if smooth_px > 1 and extra:
-            # (s is this call's own array: the largest is kept in place, one buffer for the rest)
-            buf = np.empty_like(s)
-            for other in extra:
-                cv2.filter2D(spike, -1, fall_kernel(int(smooth_px), other), dst=buf,
-                             borderType=cv2.BORDER_REFLECT)
-                cv2.max(s, buf, dst=s)
+        s = smoothed_spike(spike, smooth_px=smooth_px, slope=slope, slopes=extra)
         mask = cv2.compare(s, float(c), cv2.CMP_GE)
         low = cv2.compare(s, float(c * grow), cv2.CMP_GE) if grow < 1.0 else None
     return _label_and_merge(mask, low, min_pixels=min_pixels, merge_gap_px=merge_gap_px, slope=slope,
                             grow_slopes=extra, grow_rows=grow_rows)
+
+
+def smoothed_spike(spike: np.ndarray, *, smooth_px: int = 5, slope: float = 0.0, slopes=()) -> np.ndarray:
+    """The spike image smoothed along the fall that :func:`detect_streaks` thresholds: over
+    ``smooth_px`` rows along ``slope`` and, with more ``slopes``, the largest of it smoothed
+    along each of them (float32, a new array; the spike itself for ``smooth_px`` 1)."""
+    import cv2
+
+    if spike.dtype != np.float32:
+        spike = spike.astype(np.float32)
+    if smooth_px <= 1:
+        return spike
+    if abs(slope) < 0.05:
+        s = cv2.blur(spike, (1, int(smooth_px)))
+    else:
+        s = cv2.filter2D(spike, -1, fall_kernel(int(smooth_px), slope), borderType=cv2.BORDER_REFLECT)
+    if slopes:
+        # (s is this call's own array: the largest is kept in place, one buffer for the rest)
+        buf = np.empty_like(s)
+        for other in slopes:
+            cv2.filter2D(spike, -1, fall_kernel(int(smooth_px), other), dst=buf, borderType=cv2.BORDER_REFLECT)
+            cv2.max(s, buf, dst=s)
+    return s
 
 
 def _reach_kernel(grow_rows: int, slope: float) -> np.ndarray:
