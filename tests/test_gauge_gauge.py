@@ -655,12 +655,6 @@ def test_brightness_prior_follows_the_rate_counted_over_the_window():
     assert ref100(c) == pytest.approx(
         q_emp * g.volume.brightness_q_population_factor(noise, c, span, g._prior_rate), rel=1e-12)
     assert ref100(c) != ref10(c)
-    # in a cross wind, the factor of the wind the sample volume is taken at
-    g._wind_m_s = lambda: 3.0
-    ref_w, key_w = g._brightness_q_of_contrast()
-    assert key_w != key100
-    assert ref_w(c) == pytest.approx(
-        q_emp * g.volume.brightness_q_population_factor(noise, c, span, g._prior_rate, 3.0), rel=1e-12)
 
 
 def test_gauge_estimates_the_drop_brightness_over_a_bright_noisy_sky():

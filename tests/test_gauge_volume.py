@@ -404,44 +404,6 @@ def test_population_factor_carries_the_probes_sizes_to_the_models(volume):
     assert faint > 1.0
 
 
-def test_population_factor_in_a_wind_takes_each_size_at_its_dimmed_contrast(volume):
-    """In a cross wind each size of both populations is taken at the contrast its slant
-    leaves it: at a node the ratio of the two fixed points computed directly on the
-    model's parts, each radius's moved to its dimmed contrast (independent computation);
-    no wind and either direction of it are the same; against a dark backdrop at high noise
-    the many small, most dimmed drops of the Marshall-Palmer population scatter their focus
-    more, and the factor grows over the factor without wind."""
-    import math
-
-    from raingauge.gauge.volume import (
-        BRIGHTNESS_Q_NODES, WIND_TABLE_STEP, _Q_GRID_COARSE, _brightness_percentile_q,
-    )
-
-    span = (0.15e-3, 2.8e-3)
-    lo = BRIGHTNESS_Q_NODES[0]
-    node, i_n = 0, len(volume.noises_dn) - 2
-    noise = float(volume.noises_dn[i_n])
-    c_node = volume.contrast_dn * 2.0 ** (0.5 * node)
-    step = math.log1p(WIND_TABLE_STEP)
-    u = math.exp(round(math.log(3.0) / step) * step)         # the drift the factor is taken at
-    parts = []
-    for a, wt, q, sq in volume._q_node_parts:
-        # the node place of the dimmed contrast, linear between the nodes
-        x = node + 2.0 * math.log2(max(float(volume.wind_dimming(a, u)), 1e-6))
-        x = min(max(x, float(lo)), float(BRIGHTNESS_Q_NODES[1]))
-        k = min(math.floor(x), BRIGHTNESS_Q_NODES[1] - 1)
-        t = x - k
-        parts.append((a, *((1 - t) * arr[i_n, k - lo] + t * arr[i_n, k + 1 - lo] for arr in (wt, q, sq))))
-    direct = (_brightness_percentile_q(parts, volume.q_min, y=_Q_GRID_COARSE)
-              / _brightness_percentile_q(parts, volume.q_min, y=_Q_GRID_COARSE, flat_between=span))
-    windy = volume.brightness_q_population_factor(noise, c_node, span, None, 3.0)
-    assert windy == pytest.approx(direct, rel=1e-9)
-    assert volume.brightness_q_population_factor(noise, c_node, span, None, -3.0) == windy
-    calm = volume.brightness_q_population_factor(noise, c_node, span)
-    assert volume.brightness_q_population_factor(noise, c_node, span, None, 0.0) == calm
-    assert windy > calm
-
-
 def test_population_factor_follows_the_rate_of_its_prior(volume):
     """The factor for a Marshall-Palmer prior of another rate: the default is the prior of
     brightness_q (10 mm/h, to the bit, and one cached node), any other rate the ratio of the
@@ -502,59 +464,22 @@ def test_wind_dims_each_size_as_its_streak_slants(volume):
         assert slanted.sum() == pytest.approx(straight.sum(), rel=0.01)
 
 
-def test_kappa_in_a_wind_is_the_slanted_detection_at_the_dimmed_contrast(volume):
+def test_kappa_in_a_wind_is_kappa_at_the_dimmed_contrast(volume):
     """With a cross wind each size is sampled as if its contrast were dimmed by
-    wind_dimming and detected as the gauge detects then (the change smoothed along each of
-    the wind's slants, the largest thresholded: the volume's wind tables): kappa and the
-    pass probability over a set of backgrounds (the two the gauge and its completeness
-    probe take) both; the largest over the slants samples each size at least as well as
-    the streak's own slant alone, and no wind changes nothing."""
-    from raingauge.gauge.volume import pass_probability
-
+    wind_dimming: kappa and the pass probability over a set of backgrounds (the two the
+    gauge and its completeness probe take) both, and no wind changes nothing."""
     z0 = CAM.focus_distance_m
     c = float(volume.contrasts_dn[12])                      # a node of the table's grid
     w = volume.contrast_weights([c])
-    cube, p_z = volume.wind_tables(3.0)
-    assert volume.wind_tables(3.01)[0] is cube              # the drift rounded, the tables kept
     for a in (0.3e-3, 0.8e-3, 1.5e-3):
         dim = float(volume.wind_dimming(a, 3.0))
-        w_dim = volume.contrast_weights([c * dim])
-        col = cube[:, 0, :] @ w_dim
-        expected = np.interp(np.log(a), np.log(volume.radii_m), col)
-        assert volume.kappa(a, weights=w, wind_m_s=3.0) == pytest.approx(expected, rel=0.02)
-        assert volume.kappa(a, weights=w, wind_m_s=3.0) >= 0.98 * volume.kappa(a, contrast_dn=c * dim)
+        assert volume.kappa(a, weights=w, wind_m_s=3.0) == pytest.approx(
+            volume.kappa(a, contrast_dn=c * dim), rel=0.02)
         assert volume.pass_probability_over(a, z0, w, wind_m_s=3.0) == pytest.approx(
-            float(w_dim @ volume._p_nodes(a, z0, None, p_z)), rel=1e-9, abs=1e-12)
+            volume.pass_probability_over(a, z0, volume.contrast_weights([c * dim])), rel=1e-9, abs=1e-12)
         assert volume.kappa(a, weights=w, wind_m_s=0.0) == volume.kappa(a, weights=w)
     # the small drops, dimmed most, are sampled less in a wind
     assert volume.kappa(0.3e-3, weights=w, wind_m_s=3.0) < 0.8 * volume.kappa(0.3e-3, weights=w)
-    # a node of the wind's table is pass_probability with the wind's slants, integrated over depth
-    from raingauge.gauge.streaks import wind_slopes
-    from raingauge.physics.drops import fall_velocity
-
-    import math
-
-    from raingauge.gauge.volume import WIND_TABLE_STEP
-
-    step = math.log1p(WIND_TABLE_STEP)
-    u = math.exp(round(math.log(3.0) / step) * step)        # the drift the tables were made for
-    i, j_c, j_n = 20, 8, 3                                  # 0.35 mm, 19 gray levels, the fourth noise
-    a = float(volume.radii_m[i])
-    law = volume.rain_velocity_model or volume.velocity_model
-    z = np.linspace(*volume._z_ranges[i], 400)
-    kw = dict(velocity_model=volume.velocity_model, contrast_dn=float(volume.contrasts_dn[j_c]),
-              noise_sigma_dn=float(volume.noises_dn[j_n]), detection_threshold_dn=volume.detection_threshold_dn,
-              grow=volume.grow)
-    res = pass_probability(a, z, CAM, slopes=wind_slopes(u, law),
-                           streak_slope=u / float(fall_velocity(2 * a, model=law)), **kw)
-    k_direct = float(np.sum(res["p"] * (z / CAM.focal_length_px) ** 2) * (z[1] - z[0]))
-    assert cube[i, j_n, j_c] == pytest.approx(k_direct, rel=1e-9)
-    # a faint drop: the largest over the slants finds it more often than one direction would
-    one = pass_probability(a, z, CAM, **kw)
-    assert k_direct > 1.2 * float(np.sum(one["p"] * (z / CAM.focal_length_px) ** 2) * (z[1] - z[0]))
-    # tiny slants are smoothed straight down: the volume's own tables
-    assert volume.wind_tables(0.02)[0] is volume.kappa_cube
-    assert volume.wind_tables(0.0)[0] is volume.kappa_cube
 
 
 def test_fast_clip_is_numpys():

@@ -1882,9 +1882,8 @@ class RainGauge:
             span = self.probe.radius_range
             if np.isfinite(q_emp) and q_emp > 0 and np.isfinite(span[0]):
                 prior = self._prior_rate
-                wind = self._wind_m_s()
-                return ((lambda c: q_emp * vol.brightness_q_population_factor(noise, c, span, prior, wind)),
-                        ("probe", ring.version, id(vol), noise, prior, wind))
+                return ((lambda c: q_emp * vol.brightness_q_population_factor(noise, c, span, prior)),
+                        ("probe", ring.version, id(vol), noise, prior))
         return (lambda c: vol.brightness_q_at(noise, c)), (id(vol), noise)
 
     def _median_noise(self) -> float | None:

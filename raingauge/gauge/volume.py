@@ -149,8 +149,7 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
                      blur_sigma_px: float = DEFAULT_BLUR_SIGMA_PX, defocus_model: str = "uniform",
                      q_min: float = DEFAULT_Q_MIN, contrast_dn=DEFAULT_CONTRAST_DN,
                      noise_sigma_dn: float | None = None, detection_threshold_dn: float | None = None,
-                     smooth_px: int = 5, grow: float = DETECTION_GROW, slopes=None,
-                     streak_slope: float = 0.0) -> dict:
+                     smooth_px: int = 5, grow: float = DETECTION_GROW) -> dict:
     """Probability that a drop of radius a at depth z is detected and passes the defocus test.
 
     P = P_det P_size P_law P_focus: the detection of Eq. (19) for the streak's change
@@ -203,16 +202,6 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
     grow : float
         Hysteresis of the detection (:func:`raingauge.gauge.streaks.detect_streaks`): a
         streak is found where it reaches c and measured over where it reaches grow c.
-    slopes : sequence of float, optional
-        In a cross wind, the slants dx/dy [px/px] the detection smooths the change along
-        before it thresholds the largest (:func:`raingauge.gauge.streaks.wind_slopes`): the
-        detection and the hysteresis margin are then those of
-        :func:`raingauge.gauge.slants.slant_margin` for a streak along ``streak_slope``
-        (``contrast_dn`` is then the contrast its slant leaves,
-        :meth:`SampleVolume.wind_dimming`).  None: the change smoothed straight down the
-        column, along the streak.
-    streak_slope : float
-        The streak's own slant u / v(a) [px/px] (with ``slopes``).
 
     Returns
     -------
@@ -278,22 +267,11 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
         with np.errstate(invalid="ignore"):
             p = p * np.where(np.isfinite(sw) & np.isfinite(rel), ndtr((q - q_min) / s_q), 0.0)
             s_q = np.where(np.isfinite(sw) & np.isfinite(rel), s_q, np.nan)
-    if slopes is None:
-        p_det = np.where(finite_c, detection_probability(change, w_app, threshold_dn=c, noise_sigma_dn=noise,
-                                                         smooth_px=smooth_px, length_px=motion + w_app), 1.0)
-        # the streak's extent is taken at the hysteresis threshold grow c (detect_streaks)
-        margin = np.where(finite_c, detection_margin(change, w_app, threshold_dn=grow * c, noise_sigma_dn=noise,
-                                                     smooth_px=smooth_px), np.inf)
-    else:
-        # the largest of the change smoothed along each slant (raingauge.gauge.slants); the
-        # same tries along the streak as detection_probability
-        from raingauge.gauge.slants import slant_margin
-
-        kw = dict(noise_sigma_dn=noise, slopes=slopes, streak_slope=streak_slope, smooth_px=smooth_px)
-        m_det = slant_margin(change, w_app, threshold_dn=c, **kw)
-        tries = np.maximum((motion + w_app) / max(int(smooth_px), 1), 1.0)
-        p_det = np.where(finite_c, 1.0 - (1.0 - ndtr(m_det)) ** tries, 1.0)
-        margin = np.where(finite_c, slant_margin(change, w_app, threshold_dn=grow * c, **kw), np.inf)
+    p_det = np.where(finite_c, detection_probability(change, w_app, threshold_dn=c, noise_sigma_dn=noise,
+                                                     smooth_px=smooth_px, length_px=motion + w_app), 1.0)
+    # the streak's extent is taken at the hysteresis threshold grow c (detect_streaks)
+    margin = np.where(finite_c, detection_margin(change, w_app, threshold_dn=grow * c, noise_sigma_dn=noise,
+                                                 smooth_px=smooth_px), np.inf)
     p_size = sizing_probability(2.0 * a_img, margin, np.where(finite_c, row_snr(change, w_app, noise_change), np.inf))
     p = p * p_det * p_size
     p_law = p_law * p_det * p_size
@@ -304,14 +282,6 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
             "apparent_velocity_m_s": v_app, "width_px": w, "blur_px": b, "motion_px": motion,
             "change_dn": change, "q": q, "q_sigma": s_q}
 
-
-#: The drift the tables of :meth:`SampleVolume.wind_tables` are computed for is rounded to
-#: this relative step [-]: the slants and the drops' own all scale with the drift, so the
-#: lift (which depends on where a drop's slant lies among the detection's) barely moves
-#: with it, and the wind's dimming is taken at the drift itself (:meth:`SampleVolume.kappa`).
-WIND_TABLE_STEP = 0.05
-#: Winds whose tables :meth:`SampleVolume.wind_tables` keeps [-].
-WIND_TABLES_KEPT = 6
 
 #: Percentile of the law-abiding streaks' brightness samples that estimates E_r [%].
 BRIGHTNESS_PERCENTILE = 75.0
@@ -556,7 +526,7 @@ class SampleVolume:
         z_all = np.linspace(0.4 * z0, 2.5 * z0, 1600)
         b_all = blur_circle_px(z_all, focal_length_px=f, f_number=prof.f_number, focus_distance_m=z0,
                                pixel_pitch_m=_pitch(prof))
-        table, zbar, fac, spans, p_z, z_ranges = [], [], [], [], [], []
+        table, zbar, fac, spans, p_z = [], [], [], [], []
         q_parts = []
         self._q_nodes = {}
         self._q_at_memo = None
@@ -571,7 +541,6 @@ class SampleVolume:
             lo = z_all[max(near[0] - 1, 0)] if near.size else 0.9 * z0
             hi = z_all[min(near[-1] + 1, z_all.size - 1)] if near.size else 1.1 * z0
             z = np.linspace(lo, hi, 400)
-            z_ranges.append((float(lo), float(hi)))
             dz = z[1] - z[0]
             res = pass_probability(a, z[None, None, :], prof, velocity_model=self.velocity_model,
                                    rain_velocity_model=self.rain_velocity_model, floor=self.floor,
@@ -620,8 +589,6 @@ class SampleVolume:
         self.mean_depth_m = np.array(zbar)
         self.depth_span_m = np.array(spans, dtype=float).reshape(-1, 2)
         self._p_z = p_z
-        self._z_ranges = z_ranges
-        self._wind_memo = {}
         self._log_radii = np.log(self.radii_m)
         self._log_contrasts = np.log(self.contrasts_dn)
         self.apparent_radius_factor = np.array(fac)
@@ -759,14 +726,12 @@ class SampleVolume:
         return d_det, float(min(max(share, 0.0), 1.0))
 
     # -- per radius
-    def _noise_slice(self, noise_dn, cube=None) -> np.ndarray:
-        """kappa(a, C) (n_radii, n_contrasts) at a frame noise, linear between the grid's
-        (of ``cube``, default :attr:`kappa_cube`)."""
-        cube = self.kappa_cube if cube is None else cube
+    def _noise_slice(self, noise_dn) -> np.ndarray:
+        """kappa(a, C) (n_radii, n_contrasts) at a frame noise, linear between the grid's."""
         if noise_dn is None or not np.isfinite(noise_dn):
-            return cube[:, 0, :]
+            return self.kappa_table
         i, t = self._noise_bracket(noise_dn)
-        return (1.0 - t) * cube[:, i, :] + t * cube[:, i + 1, :]
+        return (1.0 - t) * self.kappa_cube[:, i, :] + t * self.kappa_cube[:, i + 1, :]
 
     def brightness_q_at(self, noise_dn=None, contrast_dn=None) -> float:
         """:attr:`brightness_q` at a frame noise [gray levels] (linear between the grid's;
@@ -812,7 +777,7 @@ class SampleVolume:
         return float(base * factor)
 
     def brightness_q_population_factor(self, noise_dn, contrast_dn, flat_between,
-                                       prior_rate_mm_h: float | None = None, wind_m_s: float = 0.0) -> float:
+                                       prior_rate_mm_h: float | None = None) -> float:
         """q_ref of a Marshall-Palmer population of ``prior_rate_mm_h`` (default
         :data:`BRIGHTNESS_PRIOR_RATE_MM_H`, that of :attr:`brightness_q`) over that of drops
         spread uniformly in log a between the radii ``flat_between`` = (lo, hi) [m], at a
@@ -820,10 +785,7 @@ class SampleVolume:
         depths and q', linear between its nodes) [-].  The completeness probe measures the
         second population's percentile in the frames; this factor carries it to the first.
         The heavier the rain, the larger the share of big drops, whose streaks are measured
-        best, and the smaller the factor.  In a cross wind ``wind_m_s`` each size is taken at
-        the contrast its slant leaves it (:meth:`wind_dimming`): the small drops, dimmed most,
-        are measured worse, their q' scatters more, and the factor grows (both populations
-        are in the same wind: the probe's drops slant as the rain's)."""
+        best, and the smaller the factor."""
         if self.defocus_model != "uniform" or not self._q_node_parts:
             return 1.0
         c = self.contrast_dn if contrast_dn is None or not np.isfinite(contrast_dn) else float(contrast_dn)
@@ -833,51 +795,13 @@ class SampleVolume:
         t = x - k
         i_n, tn = self._noise_bracket(None if noise_dn is None else float(noise_dn))
         span = (float(flat_between[0]), float(flat_between[1]))
-        wind = float(wind_m_s) if wind_m_s is not None and np.isfinite(wind_m_s) else 0.0
-        if wind != 0.0:
-            step = math.log1p(WIND_TABLE_STEP)
-            wind = math.copysign(math.exp(round(math.log(abs(wind)) / step) * step), wind)
         out = 0.0
         for node, wc in ((k, 1.0 - t), (k + 1, t)):
             for i, wn in ((i_n, 1.0 - tn), (i_n + 1, tn)):
                 if wc > 0.0 and wn > 0.0:
-                    if wind != 0.0:
-                        # each size at its own dimmed contrast: the node place + 2 log2(dim(a))
-                        flat = self._brightness_q_wind(node, i, wind, span)
-                        out += wc * wn * self._brightness_q_wind(node, i, wind, None, prior_rate_mm_h) / flat
-                    else:
-                        flat = self._brightness_q_node(node, i, span)
-                        out += wc * wn * self._brightness_q_node(node, i, None, prior_rate_mm_h) / flat
+                    flat = self._brightness_q_node(node, i, span)
+                    out += wc * wn * self._brightness_q_node(node, i, None, prior_rate_mm_h) / flat
         return float(out)
-
-    def _brightness_q_wind(self, node: int, i_noise: int, wind_m_s: float, flat_between=None,
-                           prior_rate_mm_h: float | None = None) -> float:
-        """:meth:`_brightness_q_node` in a cross wind: at the contrast of ``node``, each
-        radius's parts taken at the contrast its slant dims it to, linear between the nodes
-        (the nearest end beyond them); computed when first asked for."""
-        x = float(node)
-        if flat_between is None and prior_rate_mm_h is not None and \
-                float(prior_rate_mm_h) == BRIGHTNESS_PRIOR_RATE_MM_H:
-            prior_rate_mm_h = None
-        key = ("wind", node, i_noise, wind_m_s, flat_between, prior_rate_mm_h)
-        hit = self._q_nodes.get(key)
-        if hit is not None:
-            return hit
-        lo, hi = BRIGHTNESS_Q_NODES
-        dims = np.asarray(self.wind_dimming(np.array([p[0] for p in self._q_node_parts]), wind_m_s), dtype=float)
-        parts = []
-        for (a, wt, q, sq), dim in zip(self._q_node_parts, dims):
-            xa = min(max(x + 2.0 * math.log2(max(float(dim), 1e-6)), float(lo)), float(hi))
-            ka = min(math.floor(xa), hi - 1)
-            ta = xa - ka
-            j0, j1 = ka - lo, ka + 1 - lo
-            parts.append((a, (1 - ta) * wt[i_noise, j0] + ta * wt[i_noise, j1],
-                          (1 - ta) * q[i_noise, j0] + ta * q[i_noise, j1],
-                          (1 - ta) * sq[i_noise, j0] + ta * sq[i_noise, j1]))
-        val = float(_brightness_percentile_q(parts, self.q_min, y=_Q_GRID_COARSE, flat_between=flat_between,
-                                             prior_rate_mm_h=prior_rate_mm_h))
-        self._q_nodes[key] = val
-        return val
 
     def _brightness_q_node(self, node: int, i_noise: int, flat_between=None,
                            prior_rate_mm_h: float | None = None) -> float:
@@ -940,59 +864,6 @@ class SampleVolume:
                + np.bincount((row + i + 1).ravel(), (mass * t).ravel(), minlength=f.size * n))
         return out.reshape(f.size, n)
 
-    def wind_tables(self, wind_m_s: float) -> tuple[np.ndarray, list]:
-        """kappa(a, sigma, C) (n_radii, n_noises, n_contrasts) and the p(a, z) tables of
-        :meth:`pass_probability_over` for drops drifting at ``wind_m_s`` across the image,
-        detected as the gauge detects them then: the change smoothed along each slant of
-        :func:`raingauge.gauge.streaks.wind_slopes` and the largest thresholded, each size
-        slanted by its own u / v(a) (:func:`pass_probability` with ``slopes``; C is the
-        contrast its slant leaves, :meth:`wind_dimming`).  Noise lifts the largest of the
-        smoothed values over the streak's own (:mod:`raingauge.gauge.slants`): a faint
-        streak is found more often than along its own slant alone.  Computed for the wind
-        rounded to :data:`WIND_TABLE_STEP` and kept for the last few winds; the volume's own
-        tables where there is no wind or its slants are under 0.05 (the detection then
-        smooths straight down).
-        """
-        from raingauge.gauge.streaks import wind_slopes
-        from raingauge.physics.drops import fall_velocity
-
-        u = float(wind_m_s)
-        if not (math.isfinite(u) and u != 0.0):
-            return self.kappa_cube, self._p_z
-        step = math.log1p(WIND_TABLE_STEP)
-        wind = math.copysign(math.exp(round(math.log(abs(u)) / step) * step), u)
-        memo = self._wind_memo
-        if wind in memo:
-            return memo[wind]
-        prof = self.profile
-        f = prof.focal_length_px
-        law = self.rain_velocity_model or self.velocity_model
-        slopes = tuple(wind_slopes(wind, law))
-        if max(abs(x) for x in slopes) < 0.05:
-            # smoothed straight down, as detect_streaks does for slants this small
-            return self.kappa_cube, self._p_z
-        cube, p_z = [], []
-        for a, (lo, hi) in zip(self.radii_m, self._z_ranges):
-            z = np.linspace(lo, hi, 400)
-            dz = z[1] - z[0]
-            v = float(fall_velocity(2.0 * a, model=law))
-            res = pass_probability(a, z[None, None, :], prof, velocity_model=self.velocity_model,
-                                   rain_velocity_model=self.rain_velocity_model, floor=self.floor,
-                                   k_sigma=self.k_sigma, blur_variance_factor=self.blur_variance_factor,
-                                   defocus_model=self.defocus_model, q_min=self.q_min,
-                                   contrast_dn=self.contrasts_dn[None, :, None],
-                                   noise_sigma_dn=self.noises_dn[:, None, None],
-                                   detection_threshold_dn=self.detection_threshold_dn, grow=self.grow,
-                                   slopes=slopes, streak_slope=wind / v if v > 0 else 0.0)
-            p = np.broadcast_to(res["p"], (self.noises_dn.size, self.contrasts_dn.size, z.size))
-            cube.append((p * (z / f) ** 2 * dz).sum(axis=-1))
-            p_z.append((z[::P_TABLE_STRIDE].copy(), p[:, :, ::P_TABLE_STRIDE].astype(np.float32)))
-        out = (np.array(cube), p_z)
-        if len(memo) >= WIND_TABLES_KEPT:
-            memo.pop(next(iter(memo)))
-        memo[wind] = out
-        return out
-
     def kappa(self, radius_m, contrast_dn=None, *, weights=None, noise_dn=None,
               wind_m_s: float = 0.0) -> np.ndarray:
         """kappa(a) [m^3 per px^2 of image], 0 below the measurable size.
@@ -1022,7 +893,7 @@ class SampleVolume:
             if cached is not None and cached[0] == key:
                 col = cached[1]
             else:
-                table = self._noise_slice(noise_dn, self.wind_tables(wind)[0])
+                table = self._noise_slice(noise_dn)
                 dimmed = self._dimmed_weights(w, self.wind_dimming(self.radii_m, wind))
                 col = np.einsum("ij,ij->i", table, dimmed)
                 self._kappa_col = (key, col)
@@ -1116,9 +987,9 @@ class SampleVolume:
         self._bracket_memo = (noise_dn, out)
         return out
 
-    def _p_nodes(self, radius_m: float, z_m: float, noise_dn, p_z=None) -> np.ndarray:
+    def _p_nodes(self, radius_m: float, z_m: float, noise_dn) -> np.ndarray:
         """p(a, z) at every contrast of the grid, from the table the volume integrated
-        (linear in log a, the noise and z; ``p_z`` those of :meth:`wind_tables`) [-]."""
+        (linear in log a, the noise and z) [-]."""
         la = math.log(max(float(radius_m), 1e-9))
         lr = self._log_radii
         j = int(_clip(np.searchsorted(lr, la, side="right") - 1, 0, lr.size - 2))
@@ -1128,7 +999,7 @@ class SampleVolume:
         for k, wk in ((j, 1.0 - tr), (j + 1, tr)):
             if wk <= 0.0:
                 continue
-            z, p = (self._p_z if p_z is None else p_z)[k]
+            z, p = self._p_z[k]
             zf = float(z_m)
             if not z[0] <= zf <= z[-1]:
                 continue
@@ -1163,7 +1034,6 @@ class SampleVolume:
         w = np.asarray(weights, dtype=float)
         if wind_m_s and np.isfinite(wind_m_s):
             w = self._dimmed_weights(w, self.wind_dimming(radius_m, wind_m_s))[0]
-            return float(w @ self._p_nodes(radius_m, z_m, noise_dn, self.wind_tables(wind_m_s)[1]))
         return float(w @ self._p_nodes(radius_m, z_m, noise_dn))
 
     def true_radius_m(self, apparent_radius_m) -> np.ndarray:
