@@ -32,6 +32,7 @@ compared clip by clip on a subset, or a subset against a full run).
     python benchmarks/bench_gauge_accuracy.py --jobs 2 --no-replay --winds 3 --dsds gamma3 --matrix-seeds
     python benchmarks/bench_gauge_accuracy.py --no-matrix --replay-size 320x180
     python benchmarks/bench_gauge_accuracy.py --summarize full.txt winds3_rerun.txt
+    python benchmarks/bench_gauge_accuracy.py --compare before.txt after.txt
 """
 
 from __future__ import annotations
@@ -368,9 +369,15 @@ def main(argv=None) -> int:
     ap.add_argument("--summarize", nargs="+", metavar="FILE",
                     help="run nothing: the summary and table of saved runs' printed output (a clip run again "
                          "in a later file replaces the earlier)")
+    ap.add_argument("--compare", nargs=2, metavar=("BEFORE", "AFTER"),
+                    help="run nothing: two versions' saved runs clip by clip (the clips both ran, --matrix-seeds "
+                         "runs of the same clips), and each one's summary over them; a file may be several "
+                         "comma-separated, merged as --summarize merges them")
     args = ap.parse_args(argv)
     if args.summarize:
         return summarize(args.summarize)
+    if args.compare:
+        return compare(*args.compare)
 
     from raingauge.profile import default_profile
 
@@ -440,23 +447,66 @@ def main(argv=None) -> int:
     return 0
 
 
-def summarize(paths) -> int:
-    """Print the summary and the table of saved runs (each clip once: the last file that ran it)."""
+def _clip_key(r: dict) -> tuple:
+    return (r["rate"], r["bg"], r["noise"], r["wind"], r["dsd"])
+
+
+def read_runs(paths) -> tuple[dict, list[float]]:
+    """The clips (by rate, background, noise, wind and spectrum; a clip run again in a later file
+    replaces the earlier) and the rain-free rates of saved runs; ValueError naming the file
+    that cannot be read or holds no run."""
     clips, free = {}, []
     for path in paths:
         try:
             text = Path(path).read_text()
         except OSError as exc:
-            print(f"error: cannot read {path}: {exc.strerror}; pass the file a run's stdout was saved to",
-                  file=sys.stderr)
-            return 2
+            raise ValueError(f"cannot read {path}: {exc.strerror}; pass the file a run's stdout was saved to")
         rows, f = parse_output(text)
         if not rows and not f:
-            print(f"error: {path} holds no clip rows of bench_gauge_accuracy.py; pass a run's saved stdout",
-                  file=sys.stderr)
-            return 2
-        clips.update({(r["rate"], r["bg"], r["noise"], r["wind"], r["dsd"]): r for r in rows})
+            raise ValueError(f"{path} holds no clip rows of bench_gauge_accuracy.py; pass a run's saved stdout")
+        clips.update({_clip_key(r): r for r in rows})
         free = f or free
+    return clips, free
+
+
+def compare(before: str, after: str) -> int:
+    """Print two versions' saved runs clip by clip over the clips both ran (measured/true, a
+    star where the clip misses its target), then each one's summary over those clips."""
+    try:
+        runs = [read_runs(x.split(",")) for x in (before, after)]
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    (a, _), (b, _) = runs
+    keys = [k for k in a if k in b]
+    if not keys:
+        print(f"error: {before} and {after} share no clip; compare runs of the same clips (--matrix-seeds)",
+              file=sys.stderr)
+        return 2
+    print(f"# {len(keys)} clips run by both ({len(a)} before, {len(b)} after)")
+    print(f"{'rate':>6} {'background':>15} {'noise':>5} {'wind':>4} {'dsd':>15} | {'before':>7} {'after':>7} "
+          f"{'dEr':>5} {'dEr':>5}")
+    for k in keys:
+        x, y = a[k], b[k]
+        cells = [f"{r['meas'] / r['true']:6.3f}{' ' if within_target(r) else '*'}" for r in (x, y)]
+        print(f"{k[0]:6.1f} {k[1]:>15} {k[2]:5.1f} {k[3]:4.1f} {k[4]:>15} | {cells[0]} {cells[1]} "
+              f"{x['d_er']:5.1f} {y['d_er']:5.1f}")
+    for name, run in (("before", a), ("after", b)):
+        rows = [run[k] for k in keys]
+        print(f"# {name}: {sum(within_target(r) for r in rows)} of {len(rows)} within target")
+        for line in summary_lines(rows, [])[1:]:
+            if not line.startswith("  beyond"):
+                print(f"  {line}")
+    return 0
+
+
+def summarize(paths) -> int:
+    """Print the summary and the table of saved runs (each clip once: the last file that ran it)."""
+    try:
+        clips, free = read_runs(paths)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     rows = list(clips.values())
     print(f"# {len(rows)} clips from {len(paths)} file(s)")
     for line in summary_lines(rows, free) + ["# within target of the clips run (range of measured/true)"] \

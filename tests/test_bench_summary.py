@@ -105,3 +105,27 @@ def test_summarize_merges_saved_runs_and_refuses_what_is_not_one(bench, tmp_path
     assert "holds no clip rows" in capsys.readouterr().err
     assert bench.main(["--summarize", str(tmp_path / "absent.txt")]) == 2
     assert "cannot read" in capsys.readouterr().err
+
+
+def test_compare_pairs_two_versions_clip_by_clip(bench, tmp_path, capsys):
+    """Two versions' runs side by side over the clips both ran, a star on each miss, and each
+    version's count within target over those clips; runs that share no clip are refused."""
+    before = tmp_path / "before.txt"
+    before.write_text("\n".join(map(bench.format_row, ROWS)) + "\n")
+    after_rows = [dict(ROWS[3], meas=2.300), dict(ROWS[5], meas=12.5)]       # +4.1 % and +20.2 %
+    after = tmp_path / "after.txt"
+    after.write_text("\n".join(map(bench.format_row, after_rows)) + "\n")
+    assert bench.main(["--compare", str(before), str(after)]) == 0
+    out = capsys.readouterr().out
+    assert "# 2 clips run by both (6 before, 2 after)" in out
+    assert "|  1.176*  1.041 " in out           # the first version's miss, the second's hit
+    assert "|  0.865   1.202*" in out
+    assert "# before: 1 of 2 within target" in out
+    assert "# after: 1 of 2 within target" in out
+
+    other = tmp_path / "other.txt"
+    other.write_text(bench.format_row(ROWS[0]) + "\n")
+    assert bench.main(["--compare", str(other), str(after)]) == 2
+    assert "share no clip" in capsys.readouterr().err
+    assert bench.main(["--compare", str(tmp_path / "absent.txt"), str(after)]) == 2
+    assert "cannot read" in capsys.readouterr().err
