@@ -27,6 +27,12 @@ tail (P(S >= c) is at least each slant's own).  Gaussian noise is the model's on
 approximation: over 5 rows the sum of the skewed spike noise is near enough to it
 (the rates it gives match those of the smoothed noise frames to a few per cent,
 ``tests/test_gauge_slants.py``).
+
+The sample volume (:mod:`raingauge.gauge.volume`) does not take it yet: with it the
+gauge's completion no longer overshoots in a cross wind, and the error it had made up
+for, the drop brightness E_r the completeness probe's drops are drawn with, shows; the
+wind's clips read fewer within target (``benchmarks/VALIDATION.md``, "The detection's
+largest over the wind's slants, modelled").
 """
 
 from __future__ import annotations
