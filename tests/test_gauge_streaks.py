@@ -686,6 +686,116 @@ def test_detection_from_8bit_frames_equals_that_of_their_spike_image():
     assert np.count_nonzero(detect_streaks(trio, c=3.0)[1][:, 4] > 0) >= 20
 
 
+def _slanted_sums(spike, n, slopes):
+    """The spike summed over n rows along each slope, the largest: float64, the frame
+    reflected at its borders (numpy's 'symmetric', OpenCV's BORDER_REFLECT), each row read
+    between its two columns as v0 + frac (v1 - v0)."""
+    half = n // 2
+    reach = int(max(abs(s) for s in slopes) * half) + 2
+    pad = np.pad(spike.astype(np.float64), ((half, n - 1 - half), (reach, reach + 1)), mode="symmetric")
+    M, N = spike.shape
+    best = np.full((M, N), -np.inf)
+    for slope in slopes:
+        acc = np.zeros((M, N))
+        for i in range(n):
+            x = slope * (i - half)
+            x0 = math.floor(x)
+            f = x - x0
+            v0 = pad[i:i + M, reach + x0:reach + x0 + N]
+            v1 = pad[i:i + M, reach + x0 + 1:reach + x0 + 1 + N]
+            acc += v0 + f * (v1 - v0)
+        best = np.maximum(best, acc)
+    return best
+
+
+@pytest.mark.skipif(not __import__("raingauge.gauge._kernels", fromlist=["AVAILABLE"]).AVAILABLE,
+                    reason="numba not installed")
+def test_compiled_slanted_detection_sums_along_the_fall_exactly():
+    """In a cross wind the compiled pass (raingauge.gauge._kernels.slant_masks) thresholds the
+    largest over the directions of the spike summed along each.  Against an independent sum
+    in float64: on whole gray levels along the direction search's quarter-pixel slopes, where
+    sums equal thresholds exactly, the very same masks (a sum equal to c reaches it); along
+    the wind's slopes the same but within 1e-4 gray levels of a threshold.  OpenCV's filters
+    (smoothed_spike, float32) agree but for such ties.  Simulated rain in a 3 m/s wind (int16
+    and float32 spikes, the three 8-bit frames) and noise, one direction or several, with
+    and without hysteresis, odd and even lengths; detect_streaks then labels these masks."""
+    import cv2
+
+    from raingauge.gauge import _kernels
+    from raingauge.gauge.gauge import DIRECTION_SEARCH_SLOPES
+    from raingauge.gauge.streaks import _label_and_merge, smoothed_spike, spike_image
+    from raingauge.render.simulator import render_clip
+
+    prof = CAM.replace(width_px=480, height_px=270)
+    frames, _ = render_clip(prof, n_frames=3, rain_rate_mm_h=30.0, seed=4, background="skimage:brick",
+                            wind_m_s=3.0)
+    trio = tuple(np.asarray(f, np.uint8) for f in frames)
+    rng = np.random.default_rng(12)
+    noise = np.rint(rng.normal(0.0, 4.0, (41, 70))).astype(np.int16)
+    slopes3 = wind_slopes(3.0)
+    search = list(DIRECTION_SEARCH_SLOPES)
+    cases = ((3.0, 1.0, 5, slopes3[2], slopes3), (2.7, 0.6, 5, slopes3[0], slopes3), (3.3, 0.5, 4, 0.4, ()),
+             (2.0, 0.6, 7, -0.9, (-1.5, -0.3, 0.0, 1.2)), (3.0, 0.6, 5, 0.0, search), (2.2, 0.5, 6, 0.25, search))
+    n_set = n_ties = 0
+    for spike in (spike_image(*trio), spike_image(*trio).astype(np.float32), noise):
+        for c, grow, n_s, slope, slopes in cases:
+            extra = [v for v in slopes if abs(v - slope) >= 0.05]
+            exact = _slanted_sums(spike, n_s, [slope, *extra])
+            cv = smoothed_spike(spike, smooth_px=n_s, slope=slope, slopes=extra)
+            mask, low = _kernels.slant_masks(spike, n_s, [slope, *extra], c, c * grow)
+            quarter = all(float(v * 4).is_integer() for v in (slope, *extra)) and spike.dtype == np.int16
+            for got, thr in ((mask, c), (low, c * grow)):
+                level = n_s * thr
+                want = exact >= level * (1 - 1e-9)
+                if quarter:
+                    np.testing.assert_array_equal(got > 0, want, err_msg=str((c, grow, n_s, slope)))
+                    n_ties += np.count_nonzero(np.abs(exact - level) < 1e-9 * level)
+                else:
+                    off = (got > 0) != want
+                    assert np.all(np.abs(exact[off] - level) < 1e-4), (c, grow, n_s, slope)
+                # OpenCV's float32 filters: the same but where the sum is the threshold
+                off = (got > 0) != (cv2.compare(cv, thr, cv2.CMP_GE) > 0)
+                assert np.all(np.abs(exact[off] - level) < 1e-4), (c, grow, n_s, slope)
+            n_set += np.count_nonzero(mask)
+            assert _kernels.slant_masks(spike, n_s, [slope, *extra], c)[1] is None
+            if spike.shape[1] >= 64:
+                # detect_streaks's compiled path: the labels of these masks
+                a = detect_streaks(spike, c=c, grow=grow, smooth_px=n_s, slope=slope, slopes=slopes)
+                b = _label_and_merge(mask, low if grow < 1.0 else None, min_pixels=6, merge_gap_px=6.0,
+                                     slope=slope, grow_slopes=extra, grow_rows=6)
+                np.testing.assert_array_equal(a[0], b[0])
+                np.testing.assert_array_equal(a[1], b[1])
+    assert n_set > 10000 and n_ties > 100
+    # the three 8-bit frames label as their spike image
+    a = detect_streaks(trio, c=3.0, grow=0.6, slope=slopes3[2], slopes=slopes3)
+    b = detect_streaks(spike_image(*trio), c=3.0, grow=0.6, slope=slopes3[2], slopes=slopes3)
+    np.testing.assert_array_equal(a[0], b[0])
+    assert np.count_nonzero(a[1][:, 4] > 0) >= 20
+    with pytest.raises(ValueError, match="at least one direction"):
+        _kernels.slant_masks(noise, 5, [], 3.0)
+
+
+def test_hysteresis_reach_along_all_directions_is_one_dilation():
+    """The hysteresis's reach along every direction the change was smoothed along, one
+    dilation by the union of the lines (streaks._reach_union), is the largest of the
+    dilations along each line, pixel for pixel: the wind's slants, the direction search's
+    13, one upright, lines of both signs and widths."""
+    import cv2
+
+    from raingauge.gauge.streaks import _reach_kernel, _reach_union
+
+    rng = np.random.default_rng(3)
+    for g, slopes in ((6, wind_slopes(3.0)), (6, [0.0]), (6, [0.0, 0.5]), (4, list(np.arange(-6, 7) * 0.25)),
+                      (6, [-0.9, 1.2, 0.03]), (3, [2.5, -0.2])):
+        mask = ((rng.random((90, 130)) < 0.02) * 255).astype(np.uint8)
+        want = cv2.dilate(mask, _reach_kernel(g, slopes[0]))
+        for other in slopes[1:]:
+            want = cv2.max(want, cv2.dilate(mask, _reach_kernel(g, other)))
+        got = cv2.dilate(mask, _reach_union(g, slopes))
+        np.testing.assert_array_equal(got, want)
+        assert np.count_nonzero(got) > np.count_nonzero(mask)
+
+
 @pytest.mark.skipif(not __import__("raingauge.gauge._kernels", fromlist=["AVAILABLE"]).AVAILABLE,
                     reason="numba not installed")
 def test_compiled_union_find_equals_the_dict_form():

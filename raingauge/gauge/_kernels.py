@@ -11,7 +11,9 @@ giving exactly what its array or OpenCV form gives: the spike image of Eq. (19) 
 the fall and thresholded in one pass (:func:`spike_masks`), the labelling of the sparse mask
 from its runs with OpenCV's numbering (:func:`label_components`), the union of the pieces of
 one streak (:func:`union_roots`) and the histogram of the change for its noise
-(:func:`change_histogram`).
+(:func:`change_histogram`).  In a cross wind the spike is summed along each of the wind's
+slants and the largest thresholded in one pass (:func:`slant_masks`), exactly where OpenCV's
+float32 filters fall either side of a threshold a sum equals.
 
 Without numba the array form is used: ``AVAILABLE`` says which.
 """
@@ -30,8 +32,8 @@ except ImportError:  # pragma: no cover
     numba = None
     AVAILABLE = False
 
-__all__ = ["AVAILABLE", "blob_partners", "change_histogram", "label_components", "own_pixels", "profile_pass", "spike_masks",
-           "streak_table", "union_roots", "warm_up"]
+__all__ = ["AVAILABLE", "blob_partners", "change_histogram", "label_components", "own_pixels", "profile_pass",
+           "slant_masks", "spike_masks", "streak_table", "union_roots", "warm_up"]
 
 
 def _jit(fn):
@@ -929,6 +931,122 @@ def spike_masks(prev, cur, nxt, smooth_px, threshold, threshold_low=None):
 
 
 @_jit
+def _slant_masks(spike, offs, frac, reach, thr, thr_low, has_low, mask, low):
+    """The largest over K directions of the spike image summed along each (direction k's row
+    i: the value at column x + offs[k, i] + frac[k, i], read between that column and the
+    next), the rows and columns reflected at the frame's borders (``cv2.BORDER_REFLECT``),
+    compared with ``thr`` (and ``thr_low``).  In float32, each row's value taken as
+    v0 + frac (v1 - v0): exact for whole gray levels and fractions of quarter pixels, so a
+    sum that equals a threshold reaches it.  The padded rows are converted once each and
+    kept in a ring of n rows."""
+    M, N = spike.shape
+    K, n = offs.shape
+    half = n // 2
+    W = N + 2 * reach + 1
+    ring = np.zeros((n, W), np.float32)
+    acc = np.empty(N, np.float32)
+    best = np.empty(N, np.float32)
+    # the ring's slot s holds virtual row v (v % n == s) of the frame reflected at its top
+    # and bottom (row -1 is row 0, row M is row M - 1)
+    for v in range(-half, M + n - half - 1):
+        r = v
+        if r < 0:
+            r = -r - 1
+        elif r >= M:
+            r = 2 * M - r - 1
+        r = min(max(r, 0), M - 1)
+        row = ring[v % n]
+        for x in range(N):
+            row[reach + x] = np.float32(spike[r, x])
+        for j in range(reach):
+            # columns reflected: column -1 - j is column j, column N + j is column N - 1 - j
+            row[reach - 1 - j] = row[reach + min(j, N - 1)]
+            row[reach + N + j] = row[reach + max(N - 1 - j, 0)]
+        row[W - 1] = row[W - 2]
+        y = v - (n - 1 - half)
+        if y < 0:
+            continue
+        for k in range(K):
+            for i in range(n):
+                o = reach + offs[k, i]
+                # (slices: indices the compiler knows are not negative, so the loops are vectorised)
+                s0 = ring[(y + i - half) % n, o:o + N]
+                s1 = ring[(y + i - half) % n, o + 1:o + 1 + N]
+                f = frac[k, i]
+                if i == 0:
+                    for x in range(N):
+                        acc[x] = s0[x] + f * (s1[x] - s0[x])
+                else:
+                    for x in range(N):
+                        acc[x] = acc[x] + (s0[x] + f * (s1[x] - s0[x]))
+            if k == 0:
+                for x in range(N):
+                    best[x] = acc[x]
+            else:
+                for x in range(N):
+                    if acc[x] > best[x]:
+                        best[x] = acc[x]
+        for x in range(N):
+            mask[y, x] = 255 if best[x] >= thr else 0
+            if has_low:
+                low[y, x] = 255 if best[x] >= thr_low else 0
+
+
+#: A sum within this share of a threshold reaches it: the thresholds are decimal numbers
+#: (3 x 0.6 gray levels is 1.7999999999999998 in binary), the sums of whole gray levels
+#: along quarter-pixel slopes exact multiples of 1/4 [-].
+TIE_REL = 1e-6
+
+
+def slant_weights(smooth_px: int, slopes):
+    """Where the line kernels of :func:`raingauge.gauge.streaks.fall_kernel` along each of
+    ``slopes`` [px/px] over ``smooth_px`` rows read each row: per direction k and row i the
+    column offset (int64) and the fraction of the way to the next column (float32) of the
+    line's crossing, ((K, n) each), and the largest reach [px]."""
+    n = int(smooth_px)
+    half = n // 2
+    K = len(slopes)
+    offs = np.zeros((K, n), np.int64)
+    frac = np.zeros((K, n), np.float32)
+    for k, slope in enumerate(slopes):
+        for i in range(n):
+            x = float(slope) * (i - half)
+            x0 = math.floor(x)
+            offs[k, i] = x0
+            frac[k, i] = x - x0
+    reach = int(np.abs(offs).max()) + 1 if K else 1
+    return offs, frac, reach
+
+
+def slant_masks(spike, smooth_px: int, slopes, threshold, threshold_low=None):
+    """The detection masks of :func:`raingauge.gauge.streaks.detect_streaks` in a cross wind:
+    the spike image (int16 or float32) smoothed over ``smooth_px`` rows along each of
+    ``slopes`` [px/px] (the line kernels of :func:`raingauge.gauge.streaks.fall_kernel`, the
+    frame reflected at its borders), the largest of them compared with ``threshold`` (and
+    ``threshold_low``), a smoothed spike that equals one reaching it (:data:`TIE_REL`):
+    (mask, low) uint8 (0 or 255), low None without it."""
+    if len(slopes) == 0:
+        raise ValueError("slant_masks needs at least one direction to smooth along")
+    n = int(smooth_px)
+    offs, frac, reach = slant_weights(n, slopes)
+    spike = np.ascontiguousarray(spike)
+    if spike.dtype not in (np.int16, np.float32):
+        spike = spike.astype(np.float32)
+    mask = np.empty(spike.shape, np.uint8)
+    has_low = threshold_low is not None
+    low = np.empty(spike.shape, np.uint8) if has_low else np.empty((1, 1), np.uint8)
+
+    def level(t):
+        # the mean over n rows compared with t is the sum compared with n t
+        t = float(t) * n
+        return np.float32(t - TIE_REL * abs(t))
+
+    _slant_masks(spike, offs, frac, int(reach), level(threshold),
+                 level(threshold_low) if has_low else np.float32(0.0), has_low, mask, low)
+    return mask, (low if has_low else None)
+
+
+@_jit
 def _change_hist(prev, cur, nxt, row_step, col_step, hist):
     M, N = cur.shape
     for y in range(0, M, row_step):
@@ -1065,6 +1183,11 @@ def warm_up(frames_8bit: bool = False) -> None:
         change_histogram(*frames, 3, 4)
         spike_masks(*frames, 5, 15.0, 7.5)
         spike_masks(*frames, 5, 15.0)
+    # the detection masks in a cross wind, of the 8-bit frames' int16 spike or the float one
+    spike = (frames[1].astype(np.int16) - np.maximum(frames[0], frames[2]).astype(np.int16) if kind
+             else frames[1] - np.maximum(frames[0], frames[2]))
+    slant_masks(spike, 5, (0.3, 0.6), 3.0, 1.8)
+    slant_masks(spike, 5, (0.3, 0.6), 3.0)
     union_roots(4, np.array([0, 2]), np.array([1, 1]))
     for lt in (np.uint16, np.int32):
         for ft in (np.uint16, np.int32):
