@@ -641,6 +641,27 @@ class _SampleRing:
         return self._a[:self._n], self._b[:self._n]
 
 
+class _Log(deque):
+    """A bounded log of the latest samples whose ``version`` changes with every addition,
+    so what is derived from it can be kept until it does."""
+
+    def __init__(self, maxlen: int):
+        super().__init__(maxlen=maxlen)
+        self.version = 0
+
+    def append(self, x) -> None:
+        super().append(x)
+        self.version += 1
+
+    def extend(self, xs) -> None:
+        super().extend(xs)
+        self.version += 1
+
+    def clear(self) -> None:
+        super().clear()
+        self.version += 1
+
+
 class RainGauge:
     """A camera rain gauge on a stream of frames.
 
@@ -777,16 +798,17 @@ class RainGauge:
         #: why measured streaks were not counted (diagnostics)
         self.rejections: Counter = Counter()
         self._dilated = None
-        self._slopes: deque = deque(maxlen=50)          # streak direction dx/dy of counted drops
-        self._drifts: deque = deque(maxlen=50)          # their horizontal speed [m/s] (the wind)
-        self._drift_radii: deque = deque(maxlen=50)     # and the radius each was measured at [m]
+        self._slopes = _Log(50)                         # streak direction dx/dy of counted drops
+        self._drifts = _Log(50)                         # their horizontal speed [m/s] (the wind)
+        self._drift_radii = _Log(50)                    # and the radius each was measured at [m]
         # streak directions of the law-abiding streaks, measured before their drops are decided
         # (the rain's direction while the drop brightness E_r is still unknown)
         # (found by the search along all directions, DIRECTION_SEARCH_SLOPES)
-        self._law_slopes: deque = deque(maxlen=50)
-        self._law_drifts: deque = deque(maxlen=50)       # and their drift dx z0 / (f T) [m/s]
+        self._law_slopes = _Log(50)
+        self._law_drifts = _Log(50)                      # and their drift dx z0 / (f T) [m/s]
         # the probe's counted drops' measured over placed drift, by the class of their measured size
-        self._probe_drift_ratios = [deque(maxlen=60) for _ in range(len(CLASS_EDGES_M) - 1)]
+        self._probe_drift_ratios = [_Log(60) for _ in range(len(CLASS_EDGES_M) - 1)]
+        self._direction_cache = (None, None)             # (versions of the logs above, their direction)
         self._n_searched = 0                             # frames searched for the direction
         self._n_search_noise = 0                         # and the law-abiding streaks of their noise's twins
         self._n_searched_unknown = 0                     # frames analysed before the direction was known
@@ -1142,7 +1164,34 @@ class RainGauge:
             least = max(least, self._law_min_motion_px)
         return c["mot"] >= least
 
+    def _direction(self) -> tuple[bool, float, float]:
+        """(:meth:`_counted_direction`, :meth:`_rain_slope`, :meth:`_wind_m_s`), kept until
+        one of the drift and direction logs they are taken from changes (they are asked for
+        several times a frame, and each asks for medians of up to 50 samples)."""
+        key = (self._slopes.version, self._drifts.version, self._drift_radii.version,
+               self._law_slopes.version, self._law_drifts.version,
+               tuple(d.version for d in self._probe_drift_ratios))
+        if self._direction_cache[0] != key:
+            counted = self._find_counted_direction()
+            slope = self._find_rain_slope(counted)
+            self._direction_cache = (key, (counted, slope, self._find_wind_m_s(counted, slope)))
+        return self._direction_cache[1]
+
     def _counted_direction(self) -> bool:
+        """Whether the counted drops give the rain's direction (see
+        :meth:`_find_counted_direction`)."""
+        return self._direction()[0]
+
+    def _rain_slope(self) -> float:
+        """The rain's direction in the image, dx/dy [-] (see :meth:`_find_rain_slope`)."""
+        return self._direction()[1]
+
+    def _wind_m_s(self) -> float:
+        """The drops' drift across the image [m/s] the sample volume is taken at (see
+        :meth:`_find_wind_m_s`)."""
+        return self._direction()[2]
+
+    def _find_counted_direction(self) -> bool:
         """Whether the counted drops give the rain's direction (:meth:`_rain_slope`): five
         were counted, and the search's law-abiding streaks do not drift otherwise
         (:data:`DIRECTION_DRIFT_AGREEMENT`) or drift less far.  What either gets wrong
@@ -1160,8 +1209,9 @@ class RainGauge:
         tol = max(DIRECTION_DRIFT_AGREEMENT[0], DIRECTION_DRIFT_AGREEMENT[1] * abs(law))
         return abs(counted - law) <= tol or abs(counted) >= abs(law)
 
-    def _rain_slope(self) -> float:
-        """The rain's direction in the image, dx/dy [-], that the detection smooths along.
+    def _find_rain_slope(self, counted: bool) -> float:
+        """The rain's direction in the image, dx/dy [-], that the detection smooths along
+        (``counted``: :meth:`_find_counted_direction`).
 
         The median direction of the last streaks that passed the velocity law on the frames
         searched along all directions (:data:`DIRECTION_SEARCH_SLOPES`; their drops may
@@ -1171,7 +1221,7 @@ class RainGauge:
         cross wind the streaks slant by u / v(a): smoothing straight down, a faint slanted
         streak would not be detected, and the drops it would have counted not be counted
         either."""
-        if self._counted_direction():
+        if counted:
             return float(np.median(self._slopes))
         if len(self._law_slopes) >= 5:
             s = float(np.median(self._law_slopes))
@@ -1188,15 +1238,16 @@ class RainGauge:
             return None
         return wind_slopes(wind, self.volume.rain_velocity_model or self.volume.velocity_model)
 
-    def _wind_m_s(self) -> float:
+    def _find_wind_m_s(self, counted: bool, slope: float) -> float:
         """The drops' drift across the image [m/s] the sample volume is taken at
         (:meth:`raingauge.gauge.volume.SampleVolume.wind_dimming`): the last counted drops'
         (:meth:`_counted_drift`) where their direction is the rain's (:meth:`_rain_slope`), else of
         the law-abiding streaks' at z0 on the searched frames; 0 while the rain falls
-        straight down in the image (:meth:`_rain_slope` under 0.05)."""
-        if abs(self._rain_slope()) < 0.05:
+        straight down in the image (:meth:`_rain_slope` under 0.05; ``counted`` and ``slope``
+        are :meth:`_find_counted_direction`'s and :meth:`_find_rain_slope`'s)."""
+        if abs(slope) < 0.05:
             return 0.0
-        if self._counted_direction() and len(self._drifts) >= 5:
+        if counted and len(self._drifts) >= 5:
             return self._counted_drift()
         if len(self._law_drifts) >= 5:
             return float(np.median(self._law_drifts))
