@@ -908,6 +908,50 @@ def test_completion_is_clipped_not_dropped():
         assert added / duration == pytest.approx(comp["rate_mm_h"])
 
 
+def test_completion_is_bounded_by_marshall_palmers_small_drops():
+    """The completion adds at most the rain Marshall-Palmer's spectrum holds below the cut
+    beside the counted rain above it: on Marshall-Palmer's own spectrum the bound is its
+    rain below the cut (a right fit is not clipped), a steeper continued slope is clipped
+    to it (its spectrum scaled down, the whole extrapolation kept for the interval), and
+    the bound grows with the cut."""
+    from raingauge.gauge import gauge as G
+    from raingauge.physics.drops import MarshallPalmer, fall_velocity
+
+    cam = CAM.replace(noise_sigma_dn=3.0)
+    g = RainGauge(cam, drop_brightness_dn=250.0)
+    d_min = 2 * g.volume.min_radius_m
+    grid = np.linspace(d_min, 5.8e-3, 20001)
+
+    def rain(nominal, lo, hi):
+        sel = (grid >= lo) & (grid <= hi)
+        dens = MarshallPalmer(nominal).number_density(grid[sel])
+        return 3.6e6 * math.pi / 6 * np.trapezoid(grid[sel] ** 3 * fall_velocity(grid[sel]) * dens, grid[sel])
+
+    bounds = []
+    for nominal, d_cut in ((2.0, 0.8e-3), (10.0, 1.0e-3), (10.0, 1.2e-3), (50.0, 1.0e-3)):
+        above, below = rain(nominal, d_cut, 5.8e-3), rain(nominal, d_min, d_cut)
+        assert g._completion_bound(above, d_min, d_cut) == pytest.approx(below, rel=0.01)
+        bounds.append(g._completion_bound(10.0, d_min, d_cut))
+    assert bounds[1] < bounds[2]
+    assert g._completion_bound(0.0, d_min, 1e-3) == 0.0
+    # drops of an exponential steeper than Marshall-Palmer's at their rate
+    rng = np.random.default_rng(7)
+    lam, d0, n, duration = 4.0e3, 0.6e-3, 6000, 10.0
+    d = d0 + rng.exponential(1.0 / lam, n)
+    drops = [{"diameter_m": float(x), "velocity_m_s": float(fall_velocity(x)), "weight_s_m3": 1.0} for x in d]
+    counted = 3.6e6 * math.pi / 6 * sum(x["diameter_m"] ** 3 * x["velocity_m_s"] for x in drops) / duration
+    comp = g._completion(_bright_frames(), drops, duration)
+    assert comp["rate_mm_h"] == pytest.approx(comp["bound_mm_h"])
+    assert comp["bound_mm_h"] == pytest.approx(g._completion_bound(counted, d_min, comp["d_cut_m"]))
+    assert comp["extrapolated_rate_mm_h"] > 1.3 * comp["rate_mm_h"]
+    added = 3.6e6 * math.pi / 6 * np.sum(comp["diameter_m"] ** 3 * comp["velocity_m_s"] * comp["weight_s_m3"])
+    assert added / duration == pytest.approx(comp["rate_mm_h"])
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(G, "COMPLETION_MP_FACTOR", 1.2)
+        wider = RainGauge(cam, drop_brightness_dn=250.0)._completion(_bright_frames(), drops, duration)
+    assert wider["rate_mm_h"] == pytest.approx(1.2 * comp["rate_mm_h"])
+
+
 def test_completed_rain_is_in_the_rate_the_dsd_and_the_accumulation():
     """A window over a bright, noisy sky: the record's rate holds the completed rain
     (``completed_share``), its spectrum the completed small sizes, and the accumulation

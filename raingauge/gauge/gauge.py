@@ -194,6 +194,9 @@ COMPLETION_MIN_DROPS = 30
 COMPLETION_MIN_CUT = 1.15
 COMPLETION_FIT_VOLUME = 0.5
 COMPLETION_MAX_ADDED = 0.5
+#: ... and at most this many times the rain Marshall-Palmer's spectrum holds in the completed
+#: sizes beside the counted rain (:meth:`RainGauge._completion_bound`) [-]
+COMPLETION_MP_FACTOR = 1.0
 
 #: The completeness probe remembers its injections over this many windows [-].
 PROBE_MEMORY_WINDOWS = 1.25
@@ -2315,11 +2318,50 @@ class RainGauge:
         if not (rate > 0 and counted_rate > 0):
             return None
         # more than COMPLETION_MAX_ADDED of the counted rain is clipped to it (a step from
-        # all of it to none would make the rate jump with the smallest change of the fit)
-        scale = min(1.0, COMPLETION_MAX_ADDED * counted_rate / rate)
+        # all of it to none would make the rate jump with the smallest change of the fit),
+        # and more than Marshall-Palmer's share of the sizes to it
+        bound = self._completion_bound(counted_rate, d_min, d_cut)
+        scale = min(1.0, COMPLETION_MAX_ADDED * counted_rate / rate, bound / rate)
         return {"diameter_m": dc, "velocity_m_s": v, "weight_s_m3": dens * duration * scale,
                 "rate_mm_h": rate * scale, "extrapolated_rate_mm_h": rate,
-                "lambda_per_mm": 1e-3 * lam, "d_cut_m": d_cut}
+                "lambda_per_mm": 1e-3 * lam, "d_cut_m": d_cut, "bound_mm_h": bound}
+
+    def _completion_bound(self, counted_rate: float, d_min: float, d_cut: float) -> float:
+        """The most rain the completion adds [mm/h]: :data:`COMPLETION_MP_FACTOR` times what
+        the Marshall-Palmer spectrum that holds the completed rate (the counted rain
+        ``counted_rate`` [mm/h] above ``d_cut`` [m] and this between ``d_min`` and it, at the
+        gauge's velocity law) holds between ``d_min`` and ``d_cut``.
+
+        Natural spectra hold no more small drops than Marshall-Palmer's exponential, most of
+        them fewer (gamma spectra of mu > 0, the real Parsivel minutes), while an exponential
+        continued from the sizes whose sample volume is smallest and least certain can hold
+        far more: over the bright sky at 3 gray levels in a 3 m/s wind, counted from 1.07 mm
+        on in gamma rain of 10 mm/h, the continued slope of 3.1 /mm put 4.3 mm/h below the
+        cut, where the clip holds 1.05 and Marshall-Palmer 1.9.  (The nominal rate of
+        Marshall-Palmer's Lambda = 4.1 R^-0.21 /mm is found so that its spectrum holds the
+        completed rate: it does not close, and at 10 mm/h holds 11.7 mm/h.)"""
+        from raingauge.physics.drops import MarshallPalmer, fall_velocity
+
+        # (midpoints of 100 classes below the cut and 300 above it)
+        edges = np.concatenate([np.linspace(d_min, d_cut, 101), np.linspace(d_cut, 8e-3, 301)[1:]])
+        d = 0.5 * (edges[1:] + edges[:-1])
+        w = 3.6e6 * math.pi / 6.0 * d ** 3 * np.nan_to_num(
+            np.asarray(fall_velocity(d, model=self.velocity_model), dtype=float)) * np.diff(edges)
+        below = np.arange(d.size) < 100
+        if not counted_rate > 0:
+            return 0.0
+        nominal, bound = counted_rate, 0.0
+        for _ in range(8):
+            rain = w * MarshallPalmer.N0_M4 * np.exp(-MarshallPalmer.LAMBDA_COEFF_M * nominal ** -0.21 * d)
+            above = float(rain[~below].sum())
+            if not above > 0:
+                return 0.0
+            bound = counted_rate * float(rain[below].sum()) / above
+            step = (counted_rate + bound) / float(rain.sum())
+            nominal *= step
+            if abs(step - 1.0) < 1e-4:
+                break
+        return COMPLETION_MP_FACTOR * bound
 
     def _decide_arrays(self, cands: list, radii: np.ndarray, e_r: float, wind: float):
         """For candidates of sizes ``radii`` [m] (:meth:`_decide`): their kappa at their frame's
