@@ -4,8 +4,9 @@ Against a bright or textured background a streak changes a pixel by a few gray l
 and the rate moves several times as much as the contrast E_r - E_b the gauge estimated
 (``diag_gauge_truth.py --given-brightness`` shows how much of a clip's error is that).
 The gauge takes E_r from its law-abiding streaks (:func:`raingauge.gauge.gauge.drop_brightness_dn`):
-the fixed point D of their contrasts d = q' (E_r - E_b) divided by a reference q_ref, the same
-fixed point of the measured focus q' of a population of drops.  That reference is the
+the E at which their focus d / (E - E_b), each against the background behind it (d = q' (E_r - E_b)
+its contrast), has the percentile fixed point of a reference q_ref, the same fixed point of the
+measured focus q' of a population of drops.  That reference is the
 completeness probe's drops' own (drawn at a known E_r into the frames), carried from the
 probe's sizes (uniform in log a) to Marshall-Palmer rain by the sample volume's factor
 (:meth:`raingauge.gauge.volume.SampleVolume.brightness_q_population_factor`).

@@ -450,19 +450,27 @@ def drop_brightness_dn(samples_dn, background_dn, *, q_min: float = 0.6, q_ref: 
     """The drop brightness E_r from the streaks that pass the velocity law [gray levels].
 
     Each law-abiding streak gives E_b + 4 Q / (pi w'^2) = E_b + q' (E_r - E_b)
-    (:func:`raingauge.gauge.rejection.photometric_focus`): the drop's contrast times
-    its measured photometric focus q' (q <= 1, plus its error).  In heavy rain many
-    law-abiding detections are pieces of defocused drops with q' near 0, and their share
-    moves any fixed percentile of all samples; so the contrasts d = q' (E_r - E_b) are
-    taken above the focus test's cut, by the fixed point
+    (:func:`raingauge.gauge.rejection.photometric_focus`): the drop's contrast over the
+    background E_b behind it times its measured photometric focus q' (q <= 1, plus its
+    error).  At a trial brightness E the streak's focus is q'(E) = d / (E - E_b) (d the
+    sample less its background), and E_r is the E at which the focus of the streaks the
+    defocus test would keep has the reference percentile,
 
-        D = P{ d : d >= q_min D },
+        m(E) = P{ q'(E) : q'(E) >= q_min m(E) } = q_ref(E - median E_b),
 
-    (the percentile P of the samples the test would keep; iterated from the percentile
-    of all of them, the map contracts: raising D drops faint samples whose percentile
-    stays below it), and E_r - E_b = D / q_ref with q_ref the same fixed point of the
-    model's distribution of q' (:attr:`raingauge.gauge.volume.SampleVolume.brightness_q`:
-    the errors of q' lift the percentile above the in-focus q = 1).
+    with q_ref the same fixed point of the model's distribution of q'
+    (:attr:`raingauge.gauge.volume.SampleVolume.brightness_q`: the errors of q' lift the
+    percentile above the in-focus q = 1).  In heavy rain many law-abiding detections are
+    pieces of defocused drops with q' near 0, and their share would move any fixed
+    percentile of all samples; the fixed point takes the percentile of those above the
+    test's cut (iterated from the percentile of all of them, the map contracts: raising m
+    drops faint samples whose percentile stays below it).  Over a uniform background
+    m(E) (E - E_b) is the fixed point D of the contrasts d and E_r = E_b + D / q_ref.  Over
+    a textured one each streak is taken against its own background: the streaks seen lie
+    mostly over the darker parts (their contrast is larger), and a percentile of the
+    contrasts taken against the median background would put E_r too high there by the
+    ratio of their contrasts.  E is iterated as E_b + (E - E_b) m(E) / q_ref from the
+    uniform background's value (E_b the median; one step over a uniform background).
 
     Parameters
     ----------
@@ -473,51 +481,65 @@ def drop_brightness_dn(samples_dn, background_dn, *, q_min: float = 0.6, q_ref: 
     q_min : float
         Photometric focus of the defocus test [-].
     q_ref : float or callable
-        The model's fixed point of the percentile, as a fraction of E_r - E_b [-]; or that
-        fraction as a function of the contrast E_r - E_b [gray levels] (the errors of q'
-        grow as the contrast falls), and the contrast is then the fixed point
-        C = D / q_ref(C).
+        The model's fixed point of the percentile [-]; or that fixed point as a function of
+        the contrast E_r - E_b [gray levels] (the errors of q' grow as the contrast falls;
+        called with None for a first guess).
     percentile : float
         Percentile P [%].
     iterations : int
-        Most fixed-point steps.
+        Most fixed-point steps (of the percentile, and of E).
 
     Returns
     -------
     float
-        E_r [gray levels] (median E_b plus the contrast); NaN without samples.
+        E_r [gray levels]; NaN without samples.
     """
-    median_b, e = _contrast_percentile(samples_dn, background_dn, q_min=q_min, percentile=percentile,
-                                       iterations=iterations)
-    if not np.isfinite(e):
-        return float("nan")
-    return median_b + _contrast_of_percentile(e, q_ref)
-
-
-def _contrast_percentile(samples_dn, background_dn, *, q_min: float, percentile: float,
-                         iterations: int = 50) -> tuple[float, float]:
-    """The samples' part of :func:`drop_brightness_dn`: (median E_b, the fixed point D of
-    the contrasts) [gray levels]; (NaN, NaN) without samples."""
     x = np.asarray(samples_dn, dtype=np.float64).ravel()
     b = np.asarray(background_dn, dtype=np.float64).ravel()
     ok = np.isfinite(x) & np.isfinite(b)
     x, b = x[ok], b[ok]
     if x.size == 0:
-        return float("nan"), float("nan")
-    # sorted once: the samples d >= q_min e are a tail of the sorted contrasts, and each
-    # step's percentile is read off that tail
-    d = np.sort(x - b)
-    e = _percentile_of_sorted(d, 0, percentile)
+        return float("nan")
+    d = x - b
+    median_b = float(np.median(b))
+    e = _sorted_fixed_point(np.sort(d), q_min, percentile, iterations)
+    if not np.isfinite(e):
+        return float("nan")
+    c = _contrast_of_percentile(e, q_ref)
+    if not np.ptp(b) > 0 or not c > 0:
+        return median_b + c
     for _ in range(int(iterations)):
-        lo = int(np.searchsorted(d, q_min * e, side="left"))
-        if lo >= d.size:
+        # each streak against its own background (a background within a quarter of the
+        # contrast of E, or above it, is taken a quarter of the contrast below it)
+        m = _sorted_fixed_point(np.sort(d / np.maximum(median_b + c - b, 0.25 * c)), q_min, percentile,
+                                iterations)
+        ref = float(q_ref(c)) if callable(q_ref) else float(q_ref)
+        c_new = c * m / ref
+        if not (np.isfinite(c_new) and c_new > 0):
             break
-        e_new = _percentile_of_sorted(d, lo, percentile)
+        if abs(c_new - c) <= 1e-7 * max(c, 1.0):
+            c = c_new
+            break
+        c = c_new
+    return median_b + c
+
+
+def _sorted_fixed_point(s: np.ndarray, q_min: float, percentile: float, iterations: int = 50) -> float:
+    """The fixed point D = P{ s : s >= q_min D } of an increasing array ``s`` (each step's
+    percentile read off its tail, without sorting again); NaN when empty."""
+    if s.size == 0:
+        return float("nan")
+    e = _percentile_of_sorted(s, 0, percentile)
+    for _ in range(int(iterations)):
+        lo = int(np.searchsorted(s, q_min * e, side="left"))
+        if lo >= s.size:
+            break
+        e_new = _percentile_of_sorted(s, lo, percentile)
         if abs(e_new - e) <= 1e-4 * max(abs(e), 1.0):
             e = e_new
             break
         e = e_new
-    return float(np.median(b)), e
+    return float(e)
 
 
 def _contrast_of_percentile(e: float, q_ref) -> float:
@@ -792,7 +814,7 @@ class RainGauge:
         self._n_noise = 0                               # frames logged in it
         self._noise_median = (0, None)                  # (frames logged, median of the log) when last taken
         self._sharpness: deque = deque(maxlen=int(max(10 * profile.frame_rate_hz, 10)))
-        self._brightness = _SampleRing(BRIGHTNESS_SAMPLES)   # (E_b, E_r estimate) of law-abiding streaks
+        self._brightness = _SampleRing(BRIGHTNESS_SAMPLES)   # (E_b, E_b + q' (E_r - E_b)) of law-abiding streaks
         # (q', weight) of the completeness probe's measured drops (their own E_r is known)
         self._probe_focus = _SampleRing(BRIGHTNESS_SAMPLES)
         # rate of the size prior that carries the probe's focus percentile to the rain's
@@ -1621,8 +1643,22 @@ class RainGauge:
         # (flagged, not dropped: the direction search and the drift take them all)
         drift_ok = self._drift_consistent(dx[idx])
         if not probe:
-            bright = np.isfinite(ib) & (w_app[idx] >= 2.5) & drift_ok
-            self._brightness.extend(ib[bright], (ib + focused)[bright])
+            # the brightness samples as the camera saw them, each over its own background:
+            # where the change was divided by the local contrast at the E_r of the moment and
+            # scaled to C_ref, that is undone (on the mean background under the streak).  Kept
+            # scaled, a sample would carry the E_r it was measured with, and over a textured
+            # scene, where the streaks seen lie mostly over its darker parts, an E_r too high
+            # would lift the samples that estimate it (against a moving scene in light rain
+            # the estimate started at 228-260 gray levels for 200 and was still 210 a minute
+            # later)
+            if contrast is None:
+                b_s, d_s = ib, focused
+            else:
+                b_s = tab["background_dn"][idx]
+                with np.errstate(invalid="ignore"):
+                    d_s = focused * np.maximum(contrast[0] - b_s, 0.25 * contrast[1]) / contrast[1]
+            bright = np.isfinite(b_s) & np.isfinite(d_s) & (w_app[idx] >= 2.5) & drift_ok
+            self._brightness.extend(b_s[bright], (b_s + d_s)[bright])
         p_over = (self._overlap_probabilities(labels, valid, tab, idx, stats=stats)
                   if self._overlap_on and not probe else np.zeros(idx.size))
         prepared = []
@@ -1961,15 +1997,9 @@ class RainGauge:
         cached = getattr(self, "_brightness_cache", None)
         if cached is not None and cached[0] == key:
             return cached[1]
-        # the samples' fixed point changes only with them (the reference changes more often)
-        ring_key = (self._brightness.version, self.volume.q_min)
-        part = getattr(self, "_brightness_part", None)
-        if part is None or part[0] != ring_key:
-            backgrounds, samples = self._brightness.arrays()
-            part = self._brightness_part = (ring_key, _contrast_percentile(
-                samples, backgrounds, q_min=self.volume.q_min, percentile=BRIGHTNESS_PERCENTILE))
-        median_b, e = part[1]
-        e_r = median_b + _contrast_of_percentile(e, q_ref) if np.isfinite(e) else float("nan")
+        backgrounds, samples = self._brightness.arrays()
+        e_r = drop_brightness_dn(samples, backgrounds, q_min=self.volume.q_min, q_ref=q_ref,
+                                 percentile=BRIGHTNESS_PERCENTILE)
         self._brightness_cache = (key, e_r)
         return e_r
 
