@@ -25,7 +25,10 @@ processes (rows print in matrix order), ``--replay-minutes`` and
 ``--replay-size`` shorten and shrink the replay.  A clip's seed is its place in
 the list of clips run; with ``--matrix-seeds`` its place in the full matrix, so
 that a subset reruns the full matrix's own clips (two versions of the gauge
-compared clip by clip on a subset, or a subset against a full run).
+compared clip by clip on a subset, or a subset against a full run).  ``--probe-seed``
+draws the completeness probe's drops from another seed: the same clips run with two
+probe seeds and set side by side with ``--compare`` show how far a reading moves with
+the probe's draws alone, the scatter any change to the gauge must beat.
 
     python benchmarks/bench_gauge_accuracy.py --quick --size 640x360 --seconds 60
     python benchmarks/bench_gauge_accuracy.py --jobs 8 --no-replay          # the full matrix
@@ -139,7 +142,7 @@ def nominal_dm_mm(rate: float, dsd: str) -> float:
 
 
 def run_clip(profile, *, seconds, rate, background, motion, e_r, noise, wind, dsd, pf, seed,
-             gauge_law, window_s=None, drop_every=0):
+             gauge_law, window_s=None, drop_every=0, probe_seed=None):
     """One simulated clip through the gauge; with ``drop_every`` = K every K-th frame is
     missing from the stream (the others carry their times)."""
     from raingauge.gauge import RainGauge
@@ -156,7 +159,7 @@ def run_clip(profile, *, seconds, rate, background, motion, e_r, noise, wind, ds
         kw.update(rain_rate_mm_h=rate)
     sim = simulate(prof, **kw)
     window = window_s or seconds
-    g = RainGauge(prof, window_s=window, step_s=window, velocity_model=gauge_law)
+    g = RainGauge(prof, window_s=window, step_s=window, velocity_model=gauge_law, probe_seed=probe_seed)
     recs = []
     t0 = time.perf_counter()
     for k, (frame, _ft) in enumerate(sim):
@@ -170,7 +173,7 @@ def run_clip(profile, *, seconds, rate, background, motion, e_r, noise, wind, ds
 
 def _clip_row(job):
     """One clip of the matrix (run in a worker process): its printed row and summary entry."""
-    (k, rate, bg, noise, wind, dsd, size, seconds, seed, gauge_law, drop_every) = job
+    (k, rate, bg, noise, wind, dsd, size, seconds, seed, gauge_law, drop_every, probe_seed) = job
     from raingauge.profile import default_profile
 
     w, h = size
@@ -183,7 +186,7 @@ def _clip_row(job):
     spec, motion, e_r = BACKGROUNDS[bg]
     recs, truth, elapsed, e_est = run_clip(profile, seconds=seconds, rate=rate, background=spec, motion=motion,
                                            e_r=e_r, noise=noise, wind=wind, dsd=dsd, pf=pf, seed=seed + k,
-                                    gauge_law=gauge_law, drop_every=drop_every)
+                                    gauge_law=gauge_law, drop_every=drop_every, probe_seed=probe_seed)
     rec = recs[-1]
     true = float(truth["rain_rate_mm_h"])
     meas = rec["rain_rate_mm_h"]
@@ -364,6 +367,10 @@ def main(argv=None) -> int:
     ap.add_argument("--no-replay", action="store_true")
     ap.add_argument("--no-matrix", action="store_true")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--probe-seed", type=int, default=None,
+                    help="seed of the completeness probe's draws (default the gauge's): two runs of the same "
+                         "clips with different probe seeds, set side by side with --compare, show how much a "
+                         "reading moves with the probe's draws alone")
     ap.add_argument("--matrix-seeds", action="store_true",
                     help="seed each clip as in the full matrix (a subset reruns the same clips)")
     ap.add_argument("--summarize", nargs="+", metavar="FILE",
@@ -415,7 +422,8 @@ def main(argv=None) -> int:
     if not args.no_matrix:
         print(f"# gauge accuracy: {len(combos)} clips of {args.seconds:g} s at {w}x{h}, "
               f"gauge law {args.gauge_law}"
-              + (f", every {args.drop_every}th frame dropped" if args.drop_every else ""))
+              + (f", every {args.drop_every}th frame dropped" if args.drop_every else "")
+              + (f", probe seed {args.probe_seed}" if args.probe_seed is not None else ""))
         print(f"{'rate':>6} {'background':>15} {'noise':>5} {'wind':>4} {'dsd':>15} | {'true':>8} {'meas':>8} "
               f"{'ratio':>6} {'ci95':>17} {'cov':>3} {'n':>5} {'sd%':>5} {'Dm_t':>5} {'Dm_m':>5} {'fps':>5} "
               f"{'dEr':>5} {'comp%':>5} flags")
@@ -423,8 +431,8 @@ def main(argv=None) -> int:
         # matrix, so that a subset reruns the full matrix's own clips
         full = list(itertools.product(RATES, BACKGROUNDS, NOISES, WINDS, DSDS))
         places = [full.index(c) if args.matrix_seeds and c in full else k for k, c in enumerate(combos)]
-        jobs = [(k, rate, bg, noise, wind, dsd, (w, h), args.seconds, args.seed, args.gauge_law, args.drop_every)
-                for k, (rate, bg, noise, wind, dsd) in zip(places, combos)]
+        jobs = [(k, rate, bg, noise, wind, dsd, (w, h), args.seconds, args.seed, args.gauge_law, args.drop_every,
+                 args.probe_seed) for k, (rate, bg, noise, wind, dsd) in zip(places, combos)]
         for line, row in _ordered(_clip_row, jobs, args.jobs):
             rows.append(row)
             print(line, flush=True)

@@ -768,6 +768,19 @@ def test_gauge_keeps_the_latest_brightness_samples():
     assert sorted(ring.arrays()[0]) == [7.0, 8.0, 9.0, 10.0, 11.0] and ring.version > v
 
 
+def test_probe_seed_draws_other_drops_and_repeats_its_own(heavy):
+    """The completeness probe's draws follow ``probe_seed``: the same seed gives the same
+    injections and the same reading to the bit, another seed other injections (the probe's
+    sums differ) on the same clip."""
+    frames, _ = heavy
+    runs = [_run(frames, velocity_model="gunn_kinzer", probe_seed=s) for s in (7, 7, 8)]
+    (g7, r7), (g7b, r7b), (g8, r8) = runs
+    assert g7.probe.injected > 0 and g8.probe.injected > 0
+    assert [r["rain_rate_mm_h"] for r in r7] == [r["rain_rate_mm_h"] for r in r7b]
+    assert np.array_equal(g7.probe._total, g7b.probe._total)
+    assert not np.array_equal(g7.probe._total, g8.probe._total)
+
+
 def test_gauge_estimates_the_drop_brightness(heavy):
     """The gauge's running E_r on a simulated heavy shower matches the simulator's drop
     brightness; a given E_r is used as is, and a nonsensical one is refused."""

@@ -733,6 +733,10 @@ class RainGauge:
         artificial drops injected into its frames, and correct kappa(a) by it
         (:class:`raingauge.gauge.completeness.CompletenessProbe`; uniform defocus model only).
         Frames are kept back until it has its first estimate (at most until the next record).
+    probe_seed : int, optional
+        Seed of the completeness probe's random draws (where its drops go, their sizes and
+        depths, the rounding of their pixels); default the probe's own.  Two seeds on one
+        clip show how much the reading moves with the probe's draws alone.
     """
 
     def __init__(self, profile, *, window_s: float = 60.0, step_s: float = 10.0,
@@ -740,7 +744,8 @@ class RainGauge:
                  detection_threshold_dn: float | None = None, smooth_px: int = 5, min_drops: int = 20,
                  keep_drops: bool = False, defocus_model: str = "uniform",
                  overlap_correction: bool = True, volume: SampleVolume | None = None,
-                 drop_brightness_dn: float | None = None, completeness_probe: bool = True):
+                 drop_brightness_dn: float | None = None, completeness_probe: bool = True,
+                 probe_seed: int | None = None):
         from raingauge.gauge import _kernels
         from raingauge.physics.drops import FALL_VELOCITY_MODELS
 
@@ -782,8 +787,9 @@ class RainGauge:
                               else _sample_volume(profile, velocity_model, defocus_model, grow=1.0))
         self.keep_drops = keep_drops
         #: the completeness probe (None when off or for the pillbox defocus model)
+        probe_kw = {} if probe_seed is None else {"seed": int(probe_seed)}
         self.probe = (CompletenessProbe(profile, self.volume, velocity_model,
-                                        memory_s=PROBE_MEMORY_WINDOWS * self.window_s)
+                                        memory_s=PROBE_MEMORY_WINDOWS * self.window_s, **probe_kw)
                       if completeness_probe and defocus_model == "uniform" else None)
         # the probe's drops merge with the frame's rain as the real ones do: its correction
         # holds the merges, and the analytic chance of one would count them twice
