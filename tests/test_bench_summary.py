@@ -3,21 +3,16 @@ each clip against its own target (15 % from 2 mm/h on, 0.2 mm/h below)."""
 
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 
 import pytest
+from bench_helpers import load_benchmark
 
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_gauge_accuracy.py"
 
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("bench_gauge_accuracy", BENCH)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("bench_gauge_accuracy")
 
 
 def _row(rate, bg, noise, wind, dsd, true, meas, *, flags="", hi=None, dm_m=1.0, d_er=-1.2, comp=0.0):

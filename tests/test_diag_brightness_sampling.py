@@ -3,26 +3,21 @@ bootstrap spread of E_r over the streaks' and the probe's samples."""
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
+from bench_helpers import load_benchmark
 
 from raingauge.gauge import RainGauge
 from raingauge.gauge.gauge import BRIGHTNESS_PERCENTILE, PROBE_FOCUS_SAMPLES, drop_brightness_dn
 from raingauge.profile import default_profile
 
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "diag_brightness_sampling.py"
 CAM = default_profile().replace(width_px=320, height_px=240)
 
 
 @pytest.fixture(scope="module")
 def diag():
-    spec = importlib.util.spec_from_file_location("diag_brightness_sampling", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("diag_brightness_sampling")
 
 
 def _samples(n, rng, *, e_b=40.0, contrast=160.0, textured=False):
