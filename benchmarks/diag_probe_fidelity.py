@@ -13,7 +13,11 @@ and prints, per (a, z):
 * the rain the gauge credits each with on average, (2 a_m)^3 v_m / kappa(a_m) at its
   measured size and speed (0 when not counted), the quantity the probe's ratio sums,
   with its standard error, relative to the probe's (extra / probe), and
-* the model's pass probability p(a, z) averaged over the probe's drops.
+* the model's pass probability p(a, z) averaged over the probe's drops, and
+* the photometric focus q' of the gauge's brightness samples (mostly the extra drops'
+  streaks, against the simulator's E_r) and of the probe's drops (against theirs): the
+  fixed point of the percentile the drop brightness E_r is estimated at, the median and
+  the count.
 
 The two agree where the probe is faithful.  By default the gauge is given the
 simulator's drop brightness E_r: its own estimate leans on the focus of the streaks it
@@ -22,6 +26,8 @@ sees, and many sharp drops of one size move it.
     python benchmarks/diag_probe_fidelity.py --background bright_sky --points 0.45:2.48,0.5:2.5
     python benchmarks/diag_probe_fidelity.py --background dark_uniform --points 0.2:2.5 --seconds 20
     python benchmarks/diag_probe_fidelity.py --background bright_sky --noise 1 --rate 0.5 --wind 3 --points 0.4:2.5 --seconds 20
+    python benchmarks/diag_probe_fidelity.py --background textured_still --noise 1 --rate 0.3 --wind 3 \
+        --points 1.0:2.5,0.5:2.5,2.0:2.42 --seconds 20 --seed 5
 """
 
 from __future__ import annotations
@@ -47,6 +53,12 @@ def _ratio(a, b) -> str:
     return f"{r:20.3f} +- {se:5.3f}"
 
 
+def _focus(summary) -> str:
+    """'P (median, n)' of a focus summary."""
+    p, med, n = summary
+    return f"{p:5.3f} ({med:5.3f}, {n:4d})" if n else f"{'-':>20s}"
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_clip_arguments(ap, rate=2.0, dsd="gamma3", seconds=30.0, seed=12, dsds=("marshall_palmer", "gamma3"))
@@ -70,7 +82,7 @@ def main(argv=None) -> int:
           f"{args.seconds:g} s, "
           f"E_r {'estimated' if args.estimate_brightness else 'given'}")
     print("  a [mm]  z [m]  r [px]  L [px]     extra counted        probe counted        "
-          "rain per drop, extra / probe   model p   E_r")
+          "rain per drop, extra / probe   model p   E_r   q' streaks (median, n)   q' probe (median, n)")
     for a_mm, z in points:
         spec, motion, e_r = BACKGROUNDS[args.background]
         res = probe_fidelity(prof, radius_m=1e-3 * a_mm, depth_m=z, background=spec, motion=motion,
@@ -81,7 +93,7 @@ def main(argv=None) -> int:
         print(f"  {a_mm:6.3f}  {z:5.3f}  {res['radius_px']:6.2f}  {res['length_px']:6.1f}   "
               f"{rh:6d}/{rt:6d} = {rh / max(rt, 1):5.3f}   {ph:5d}/{pt:5d} = {ph / max(pt, 1):5.3f}   "
               f"{_ratio(res['real_share'], res['probe_share'])}   {res['model_p']:7.3f}  "
-              f"{res['drop_brightness_dn']:5.1f}")
+              f"{res['drop_brightness_dn']:5.1f}   {_focus(res['focus_streaks'])}   {_focus(res['focus_probe'])}")
     return 0
 
 

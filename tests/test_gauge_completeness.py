@@ -749,6 +749,29 @@ def test_probe_counts_its_drops_as_the_gauge_counts_the_same_drops_in_the_video(
     assert abs(m_real - m_prb) < 4.0 * math.hypot(se_real, se_prb)
 
 
+@pytest.mark.parametrize("wind", [0.0, 3.0])
+def test_probe_drops_are_as_sharp_as_the_same_drops_in_the_video(wind):
+    """The probe's focus samples set the reference of the drop brightness E_r, so its drops
+    must look as sharp as the rain's: sharp 1-mm drops rendered into a clip over the brick
+    wall, upright and slanted by a 3 m/s wind, give the same photometric focus q' (the
+    percentile fixed point E_r is taken at, and the median) as the probe's drops pinned to
+    them, within a percent, and are counted as often."""
+    from raingauge.gauge.fidelity import probe_fidelity
+
+    res = probe_fidelity(CAM.replace(noise_sigma_dn=1.0), radius_m=1e-3, depth_m=2.5, background="skimage:brick",
+                         drop_brightness_dn=200.0, rain_rate_mm_h=0.3, seconds=10.0, coverage=0.04,
+                         wind_m_s=wind, seed=5)
+    (rh, rt), (ph, pt) = res["real"], res["probe"]
+    real, prb = rh / rt, ph / pt
+    assert 0.5 < real < 0.95
+    assert abs(real - prb) < 4.0 * math.sqrt(real * (1 - real) / rt + prb * (1 - prb) / pt)
+    (p_s, med_s, n_s), (p_p, med_p, n_p) = res["focus_streaks"], res["focus_probe"]
+    assert n_s > 300 and n_p > 300
+    assert 0.95 < med_s < 1.1 and p_s > med_s
+    assert p_s == pytest.approx(p_p, abs=0.01)
+    assert med_s == pytest.approx(med_p, abs=0.01)
+
+
 def test_drift_is_corrected_by_what_the_gauge_makes_of_the_probes():
     """A drop's drift is measured as its slant times its speed at the depth of its measured
     size, so a size measured small drifts slow.  The probe's counted drops, placed with a

@@ -78,7 +78,12 @@ def probe_fidelity(profile, *, radius_m: float, depth_m: float, background: str 
     and ``probe_share``, each (mean, standard error) of the rain credited per drop
     [m^4/s / (m^3/px^2)]; ``model_p`` the
     model's pass probability averaged over the probe's drops; ``drop_brightness_dn`` the
-    gauge's E_r; ``radius_px`` and ``length_px`` of the streak.  An extra drop is counted when a
+    gauge's E_r; ``radius_px`` and ``length_px`` of the streak; ``focus_streaks`` and
+    ``focus_probe``, each (percentile fixed point, median, count) of the photometric focus
+    q': of the gauge's latest brightness samples (the extra drops' streaks, with the clip's
+    own rain, measured against ``drop_brightness_dn``) and of the probe's latest drops
+    (against the E_r they were drawn with), the two sets the drop brightness is estimated
+    from (:func:`raingauge.gauge.gauge.drop_brightness_dn`).  An extra drop is counted when a
     counted drop of its frame lies within the streak's radius + 3 px across and a quarter
     of its length + 3 px along from its centre (and a quarter of its slant more across).
     """
@@ -149,10 +154,31 @@ def probe_fidelity(profile, *, radius_m: float, depth_m: float, background: str 
         real_shares.append(shares)
     real_shares = np.concatenate(real_shares) if real_shares else np.zeros(0)
     out = np.array([(counted, p, e) for _a, _z, counted, p, e in g.probe.outcomes], dtype=float).reshape(-1, 3)
+    # the photometric focus q' of the streaks' brightness samples against the clip's E_r (each
+    # over its own background), and of the probe's drops against the E_r they were drawn with
+    backgrounds, samples = g._brightness.arrays()
+    with np.errstate(all="ignore"):
+        q_streaks = (samples - backgrounds) / np.maximum(drop_brightness_dn - backgrounds, 1.0)
+    q_probe = g._probe_focus.arrays()[0]
     return {"real": (hits, total), "probe": (int(out[:, 0].sum()), len(out)),
             "real_share": _mean_se(real_shares), "probe_share": _mean_se(out[:, 2]),
             "model_p": float(out[:, 1].mean()) if len(out) else math.nan,
-            "drop_brightness_dn": float(g.drop_brightness_estimate_dn), "radius_px": r, "length_px": length}
+            "drop_brightness_dn": float(g.drop_brightness_estimate_dn), "radius_px": r, "length_px": length,
+            "focus_streaks": _focus_summary(q_streaks, g.volume.q_min),
+            "focus_probe": _focus_summary(q_probe, g.volume.q_min)}
+
+
+def _focus_summary(q, q_min: float) -> tuple[float, float, int]:
+    """(the fixed point of the percentile E_r is taken at, the median, the count) of focus
+    values q' [-] (NaN, NaN, 0 without any)."""
+    from raingauge.gauge.gauge import BRIGHTNESS_PERCENTILE, focus_percentile
+
+    q = np.asarray(q, dtype=float)
+    q = q[np.isfinite(q)]
+    if q.size == 0:
+        return math.nan, math.nan, 0
+    return (float(focus_percentile(q, q_min=q_min, percentile=BRIGHTNESS_PERCENTILE)), float(np.median(q)),
+            int(q.size))
 
 
 def _mean_se(x) -> tuple[float, float]:
