@@ -19,6 +19,9 @@ first two differ, E_r is off by their ratio in contrast.
 
     python benchmarks/diag_drop_brightness.py --background bright_sky --noise 3 --rate 2 --winds 0,3 --seeds 101,102,103
 
+``--percentiles 50,75,90`` adds, per clip, the needed and the probe's fixed points at those
+percentiles, and the quantiles of the streaks' q' (at the true E_r) and of the probe's.
+
 Clips of 30 s at 1280x720 take about a minute each on one core.
 """
 
@@ -68,7 +71,33 @@ def run(background: str, noise: float, wind: float, seconds: float, seed: int, s
     return {"ratio": rec["rain_rate_mm_h"] / float(sim.truth["rain_rate_mm_h"]),
             "e_r": g.drop_brightness_estimate_dn, "e_r_true": e_r, "n": int(samples.size),
             "needed": needed, "used": used, "probe": probe_own,
-            "factor": used / probe_own if probe_own > 0 else np.nan}
+            "factor": used / probe_own if probe_own > 0 else np.nan,
+            "q_true": q_true, "probe_q": pq, "probe_w": pw, "q_min": q_min}
+
+
+def percentile_rows(r: dict, percentiles) -> list[str]:
+    """Lines of the streaks' fixed point of q' at the true E_r (needed) beside the probe's
+    own, at each percentile of ``percentiles`` [%]; then the 10/25/50/75/90 % quantiles of
+    either's q' (the probe's weighted as the gauge weights them)."""
+    from raingauge.gauge import gauge as G
+
+    lines = []
+    for p in percentiles:
+        need = G.focus_percentile(r["q_true"], q_min=r["q_min"], percentile=p)
+        own = (G.focus_percentile(r["probe_q"], r["probe_w"], q_min=r["q_min"], percentile=p)
+               if r["probe_q"].size else np.nan)
+        lines.append(f"      P{p:g}: needed {need:6.3f}  probe's {own:6.3f}  needed/probe's {need / own:6.3f}")
+    qs = np.array([0.1, 0.25, 0.5, 0.75, 0.9])
+    real = np.quantile(r["q_true"], qs) if r["q_true"].size else np.full(qs.size, np.nan)
+    if r["probe_q"].size:
+        order = np.argsort(r["probe_q"])
+        cw = np.cumsum(r["probe_w"][order])
+        own = np.interp(qs, (cw - 0.5 * r["probe_w"][order]) / cw[-1], r["probe_q"][order])
+    else:
+        own = np.full(qs.size, np.nan)
+    lines.append("      q' at 10/25/50/75/90 %: streaks " + " ".join(f"{x:.3f}" for x in real)
+                 + ", probe's " + " ".join(f"{x:.3f}" for x in own))
+    return lines
 
 
 def main(argv=None) -> int:
@@ -76,13 +105,20 @@ def main(argv=None) -> int:
     add_clip_arguments(ap, rate=2.0, dsd="marshall_palmer", seconds=30.0, seed=101)
     ap.add_argument("--winds", default="0,3", help="winds [m/s], comma-separated")
     ap.add_argument("--seeds", default=None, help="seeds, comma-separated (default --seed)")
+    ap.add_argument("--percentiles", default=None,
+                    help="also print the needed and the probe's fixed point of q' at these percentiles [%%], "
+                         "comma-separated, and the quantiles of either's q'")
     args = ap.parse_args(argv)
     size = frame_size(ap, args.size)
     try:
         winds = [float(x) for x in args.winds.split(",")]
         seeds = [int(x) for x in (args.seeds or str(args.seed)).split(",")]
+        percentiles = [float(x) for x in args.percentiles.split(",")] if args.percentiles else []
     except ValueError:
-        ap.error(f"--winds and --seeds are comma-separated numbers, got {args.winds!r} and {args.seeds!r}")
+        ap.error(f"--winds, --seeds and --percentiles are comma-separated numbers, got {args.winds!r}, "
+                 f"{args.seeds!r} and {args.percentiles!r}")
+    if any(not 0.0 < p < 100.0 for p in percentiles):
+        ap.error(f"--percentiles lie between 0 and 100, got {args.percentiles!r}")
     dsd_kw = dsd_keywords(ap, args.dsd, args.rate, args.seconds)
     print(f"# {args.rate} mm/h {args.dsd} over {args.background}, noise {args.noise}, {args.seconds:g} s at "
           f"{size[0]}x{size[1]}")
@@ -93,6 +129,8 @@ def main(argv=None) -> int:
             print(f" {wind:4.1f} {seed:5d} | {r['ratio']:9.3f} | {r['e_r']:5.1f} {r['e_r_true']:5.1f} | "
                   f"{r['n']:7d} | {r['needed']:9.3f} {r['used']:11.3f} | {r['probe']:7.3f} {r['factor']:7.3f}",
                   flush=True)
+            if percentiles:
+                print("\n".join(percentile_rows(r, percentiles)), flush=True)
     return 0
 
 
