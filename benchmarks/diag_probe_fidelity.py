@@ -21,11 +21,15 @@ and prints, per (a, z):
 
 The two agree where the probe is faithful.  By default the gauge is given the
 simulator's drop brightness E_r: its own estimate leans on the focus of the streaks it
-sees, and many sharp drops of one size move it.
+sees, and many sharp drops of one size move it.  ``--rejections`` prints under each point
+how many streaks of the video each of the gauge's tests turned away (``no_volume``: a drop
+measured at a size whose modelled sample volume lies under the floor, left to the
+spectrum's completion).
 
     python benchmarks/diag_probe_fidelity.py --background bright_sky --points 0.45:2.48,0.5:2.5
     python benchmarks/diag_probe_fidelity.py --background dark_uniform --points 0.2:2.5 --seconds 20
     python benchmarks/diag_probe_fidelity.py --background bright_sky --noise 1 --rate 0.5 --wind 3 --points 0.4:2.5 --seconds 20
+    python benchmarks/diag_probe_fidelity.py --background dark_uniform --rate 0.3 --wind 3 --points 0.35:2.5 --rejections
     python benchmarks/diag_probe_fidelity.py --background textured_still --noise 1 --rate 0.3 --wind 3 \
         --points 1.0:2.5,0.5:2.5,2.0:2.42 --seconds 20 --seed 5
 """
@@ -65,6 +69,9 @@ def main(argv=None) -> int:
     ap.add_argument("--points", default="0.45:2.48,0.5:2.5,0.55:2.53",
                     help="drops as RADIUS_MM:DEPTH_M, comma-separated")
     ap.add_argument("--wind", type=float, default=0.0, help="cross wind [m/s]: the drops slant with it")
+    ap.add_argument("--rejections", action="store_true",
+                    help="also print, per point, how many streaks of the video each of the gauge's tests "
+                         "turned away")
     ap.add_argument("--estimate-brightness", action="store_true",
                     help="let the gauge estimate E_r (the extra drops move the estimate)")
     args = ap.parse_args(argv)
@@ -94,6 +101,9 @@ def main(argv=None) -> int:
               f"{rh:6d}/{rt:6d} = {rh / max(rt, 1):5.3f}   {ph:5d}/{pt:5d} = {ph / max(pt, 1):5.3f}   "
               f"{_ratio(res['real_share'], res['probe_share'])}   {res['model_p']:7.3f}  "
               f"{res['drop_brightness_dn']:5.1f}   {_focus(res['focus_streaks'])}   {_focus(res['focus_probe'])}")
+        if args.rejections:
+            print("          turned away: " + ", ".join(f"{k} {v}" for k, v in sorted(res["rejections"].items())
+                                                       if v))
     return 0
 
 

@@ -83,7 +83,9 @@ def probe_fidelity(profile, *, radius_m: float, depth_m: float, background: str 
     q': of the gauge's latest brightness samples (the extra drops' streaks, with the clip's
     own rain, measured against ``drop_brightness_dn``) and of the probe's latest drops
     (against the E_r they were drawn with), the two sets the drop brightness is estimated
-    from (:func:`raingauge.gauge.gauge.drop_brightness_dn`).  An extra drop is counted when a
+    from (:func:`raingauge.gauge.gauge.drop_brightness_dn`); ``rejections`` the gauge's
+    count of the streaks of the video (the extra drops and the clip's rain) each test
+    turned away (:attr:`RainGauge.rejections`).  An extra drop is counted when a
     counted drop of its frame lies within the streak's radius + 3 px across and a quarter
     of its length + 3 px along from its centre (and a quarter of its slant more across).
     """
@@ -165,7 +167,8 @@ def probe_fidelity(profile, *, radius_m: float, depth_m: float, background: str 
             "model_p": float(out[:, 1].mean()) if len(out) else math.nan,
             "drop_brightness_dn": float(g.drop_brightness_estimate_dn), "radius_px": r, "length_px": length,
             "focus_streaks": _focus_summary(q_streaks, g.volume.q_min),
-            "focus_probe": _focus_summary(q_probe, g.volume.q_min)}
+            "focus_probe": _focus_summary(q_probe, g.volume.q_min),
+            "rejections": dict(g.rejections)}
 
 
 def _focus_summary(q, q_min: float) -> tuple[float, float, int]:
