@@ -464,22 +464,88 @@ def test_wind_dims_each_size_as_its_streak_slants(volume):
         assert slanted.sum() == pytest.approx(straight.sum(), rel=0.01)
 
 
-def test_kappa_in_a_wind_is_kappa_at_the_dimmed_contrast(volume):
-    """With a cross wind each size is sampled as if its contrast were dimmed by
-    wind_dimming: kappa and the pass probability over a set of backgrounds (the two the
-    gauge and its completeness probe take) both, and no wind changes nothing."""
-    z0 = CAM.focus_distance_m
+def test_slanted_streak_is_detected_dimmed_and_measured_at_the_square_root():
+    """A streak slanting by theta changes each pixel by cos(theta) of an upright one's: the
+    detection's per-pixel tests see that dimmed change, while the measurement on the rows
+    across it (the same signal over 1 / cos(theta) as many pixels) sees the upright
+    streak's at sqrt(cos(theta)) of it: its focus error and the velocity test's."""
+    z = np.linspace(2.40, 2.60, 9)
+    g, c = 0.6, 120.0
+    kw = dict(velocity_model="gunn_kinzer", noise_sigma_dn=3.0)
+    for a in (0.3e-3, 0.5e-3, 1.0e-3):
+        slanted = pass_probability(a, z, CAM, contrast_dn=c, slant_cos=g, **kw)
+        dimmed = pass_probability(a, z, CAM, contrast_dn=c * g, **kw)
+        rows = pass_probability(a, z, CAM, contrast_dn=c * math.sqrt(g), **kw)
+        np.testing.assert_allclose(slanted["p_detect"], dimmed["p_detect"], rtol=1e-12)
+        np.testing.assert_allclose(slanted["change_dn"], dimmed["change_dn"], rtol=1e-12)
+        np.testing.assert_allclose(slanted["q_sigma"], rows["q_sigma"], rtol=1e-12)
+        # in focus: detected as the dimmed streak, measured better than it (off focus the
+        # larger errors of a dimmer measurement let more blurred drops through)
+        k = 4
+        assert dimmed["p"][k] - 1e-12 <= slanted["p"][k] <= pass_probability(a, z, CAM, contrast_dn=c, **kw)["p"][k] + 1e-12
+    # falling straight down changes nothing
+    upright = pass_probability(0.4e-3, z, CAM, contrast_dn=c, **kw)
+    same = pass_probability(0.4e-3, z, CAM, contrast_dn=c, slant_cos=1.0, **kw)
+    for key in ("p", "p_law", "p_detect", "q_sigma"):
+        np.testing.assert_array_equal(upright[key], same[key])
+
+
+def test_kappa_in_a_wind_is_the_wind_volumes(volume):
+    """In a cross wind kappa integrates the pass probability of each size's own slant
+    (wind_dimming) over depth, as computed here on a finer grid of depths; the pass
+    probability over a set of backgrounds (the completeness probe's) is the slanted
+    streak's; between the steps of WIND_STEP_M_S both are linear in the wind; no wind
+    changes nothing; the small drops, slanting most, are sampled less, but more than if
+    their measurement were dimmed as their detection is."""
+    from raingauge.gauge.volume import WIND_STEP_M_S
+
+    f, z0 = CAM.focal_length_px, CAM.focus_distance_m
     c = float(volume.contrasts_dn[12])                      # a node of the table's grid
     w = volume.contrast_weights([c])
-    for a in (0.3e-3, 0.8e-3, 1.5e-3):
-        dim = float(volume.wind_dimming(a, 3.0))
-        assert volume.kappa(a, weights=w, wind_m_s=3.0) == pytest.approx(
-            volume.kappa(a, contrast_dn=c * dim), rel=0.02)
-        assert volume.pass_probability_over(a, z0, w, wind_m_s=3.0) == pytest.approx(
-            volume.pass_probability_over(a, z0, volume.contrast_weights([c * dim])), rel=1e-9, abs=1e-12)
+    wind = 6 * WIND_STEP_M_S
+    # (radii of the table's grid: between them kappa is interpolated in log a)
+    for a in volume.radii_m[np.searchsorted(volume.radii_m, [0.3e-3, 0.8e-3, 1.5e-3])]:
+        a = float(a)
+        g = float(volume.wind_dimming(a, wind))
+        lo, hi = volume.depth_span(a)
+        z = np.linspace(0.98 * float(lo), 1.02 * float(hi), 4000)
+        p = pass_probability(a, z, CAM, velocity_model="gunn_kinzer", contrast_dn=c, slant_cos=g,
+                             q_min=volume.q_min, grow=volume.grow)["p"]
+        direct = float(np.sum(p * (z / f) ** 2) * (z[1] - z[0]))
+        assert float(volume.kappa(a, weights=w, wind_m_s=wind)) == pytest.approx(direct, rel=0.01)
+        at_z0 = pass_probability(a, np.array([z0]), CAM, velocity_model="gunn_kinzer", contrast_dn=c,
+                                 slant_cos=g, q_min=volume.q_min, grow=volume.grow)["p"][0]
+        assert volume.pass_probability_over(a, z0, w, wind_m_s=wind) == pytest.approx(at_z0, abs=0.01)
         assert volume.kappa(a, weights=w, wind_m_s=0.0) == volume.kappa(a, weights=w)
-    # the small drops, dimmed most, are sampled less in a wind
-    assert volume.kappa(0.3e-3, weights=w, wind_m_s=3.0) < 0.8 * volume.kappa(0.3e-3, weights=w)
+        half = wind - 0.5 * WIND_STEP_M_S
+        assert float(volume.kappa(a, weights=w, wind_m_s=half)) == pytest.approx(
+            0.5 * float(volume.kappa(a, weights=w, wind_m_s=wind)
+                        + volume.kappa(a, weights=w, wind_m_s=wind - WIND_STEP_M_S)), rel=1e-12)
+    small = 0.3e-3
+    dimmed_all = float(volume.kappa(small, contrast_dn=c * float(volume.wind_dimming(small, wind))))
+    windy = float(volume.kappa(small, weights=w, wind_m_s=wind))
+    assert dimmed_all < windy < 0.8 * float(volume.kappa(small, weights=w))
+    assert volume.in_wind(wind) is volume.in_wind(wind) and volume.in_wind(0.0) is volume
+
+
+def test_population_factor_in_a_wind_is_the_wind_volumes(volume):
+    """The factor that carries the probe's reference of the drop brightness to the rain's
+    sizes is, in a cross wind, that of the wind's volume (the small drops leave both
+    populations, Marshall-Palmer's the more), linear between the wind's steps, and moves
+    from the factor without wind."""
+    from raingauge.gauge.volume import WIND_STEP_M_S
+
+    span = (0.15e-3, 2.8e-3)
+    wind = 6 * WIND_STEP_M_S
+    for noise, c in ((float(volume.noises_dn[0]), volume.contrast_dn), (float(volume.noises_dn[2]), 40.0)):
+        calm = volume.brightness_q_population_factor(noise, c, span)
+        windy = volume.brightness_q_population_factor(noise, c, span, wind_m_s=wind)
+        assert windy == volume.in_wind(wind).brightness_q_population_factor(noise, c, span, wind_m_s=wind)
+        assert abs(windy / calm - 1.0) > 2e-3
+        assert volume.brightness_q_population_factor(noise, c, span, wind_m_s=0.0) == calm
+        mid = volume.brightness_q_population_factor(noise, c, span, wind_m_s=wind - 0.25 * WIND_STEP_M_S)
+        below = volume.brightness_q_population_factor(noise, c, span, wind_m_s=wind - WIND_STEP_M_S)
+        assert mid == pytest.approx(0.75 * windy + 0.25 * below, rel=1e-12)
 
 
 def test_fast_clip_is_numpys():

@@ -43,8 +43,11 @@ the frame's measured streak density; in a cross wind the streaks are
 parallelograms slanted alike, and their row widths, not their boxes, set the
 coverage).  In a cross wind u a
 drop crosses each pixel faster and its streak is dimmer by cos(theta),
-tan(theta) = u / v(a): kappa is taken at each size's dimmed contrast
-(:meth:`raingauge.gauge.volume.SampleVolume.wind_dimming`).  So each frame estimates the density over one frame period
+tan(theta) = u / v(a), to the detection's per-pixel tests; the measurement, on the
+rows across the streak, holds the same signal over 1 / cos(theta) as many pixels and
+loses sqrt(cos(theta)) of its signal to noise: kappa is the wind's
+(:meth:`raingauge.gauge.volume.SampleVolume.in_wind`), as is the model's population
+of the drop brightness's reference.  So each frame estimates the density over one frame period
 Delta, and a window's rate divides by the frames actually analysed: frames
 missing from the stream (``dropped_frames``) leave the rate unbiased, and a
 drop accepted in some of the frames that show it whole weighs what kappa says
@@ -240,6 +243,10 @@ BRIGHTNESS_SAMPLES = 2000
 #: Focus samples of the completeness probe's drops from which their percentile replaces
 #: the model's reference q_ref in the drop brightness E_r (:meth:`RainGauge._drop_brightness`) [-].
 PROBE_FOCUS_SAMPLES = 400
+
+#: The wind the reference of the drop brightness is taken at is rounded to this step [m/s]
+#: (the measured drift wanders by less between the drops counted).
+BRIGHTNESS_WIND_STEP_M_S = 0.05
 
 #: Per-pixel signal to noise of a streak's change below which its width and ends scatter
 #: beyond the velocity law's tolerance (dark scenes: drops read ~2.3 and are counted;
@@ -1967,6 +1974,10 @@ class RainGauge:
         alike."""
         vol = self.volume
         noise = self._median_noise()
+        # (in a cross wind the model's populations are the wind's, Marshall-Palmer's and the
+        # probe's alike: the wind takes the small drops, which slant most, out of both)
+        wind = abs(self._wind_m_s())
+        wind = BRIGHTNESS_WIND_STEP_M_S * round(wind / BRIGHTNESS_WIND_STEP_M_S) if np.isfinite(wind) else 0.0
         ring = self._probe_focus
         if self.probe is not None and len(ring) >= PROBE_FOCUS_SAMPLES:
             cached = getattr(self, "_probe_q_cache", None)
@@ -1978,9 +1989,9 @@ class RainGauge:
             span = self.probe.radius_range
             if np.isfinite(q_emp) and q_emp > 0 and np.isfinite(span[0]):
                 prior = self._prior_rate
-                return ((lambda c: q_emp * vol.brightness_q_population_factor(noise, c, span, prior)),
-                        ("probe", ring.version, id(vol), noise, prior))
-        return (lambda c: vol.brightness_q_at(noise, c)), (id(vol), noise)
+                return ((lambda c: q_emp * vol.brightness_q_population_factor(noise, c, span, prior, wind)),
+                        ("probe", ring.version, id(vol), noise, prior, wind))
+        return (lambda c: vol.brightness_q_at(noise, c, wind)), (id(vol), noise, wind)
 
     def _median_noise(self) -> float | None:
         """The median noise of the recent frames [gray levels] (None before the first), taken

@@ -44,7 +44,7 @@ int min(d, chord) = |R| - |R intersect (R + d)| for a convex region R.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -131,6 +131,10 @@ def background_histogram(frame, *, step: int = 8, n_bins: int = 64) -> np.ndarra
 #: :meth:`SampleVolume.pass_probability_at` [-].
 P_TABLE_STRIDE = 4
 
+#: Step of the winds the sample volume is built at [m/s] (:meth:`SampleVolume.in_wind`):
+#: between two steps its quantities are taken linear in the wind.
+WIND_STEP_M_S = 0.5
+
 
 def _pitch(profile) -> float:
     return profile.pixel_pitch_m if profile.pixel_pitch_m else 5e-6
@@ -149,7 +153,7 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
                      blur_sigma_px: float = DEFAULT_BLUR_SIGMA_PX, defocus_model: str = "uniform",
                      q_min: float = DEFAULT_Q_MIN, contrast_dn=DEFAULT_CONTRAST_DN,
                      noise_sigma_dn: float | None = None, detection_threshold_dn: float | None = None,
-                     smooth_px: int = 5, grow: float = DETECTION_GROW) -> dict:
+                     smooth_px: int = 5, grow: float = DETECTION_GROW, slant_cos=1.0) -> dict:
     """Probability that a drop of radius a at depth z is detected and passes the defocus test.
 
     P = P_det P_size P_law P_focus: the detection of Eq. (19) for the streak's change
@@ -202,6 +206,14 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
     grow : float
         Hysteresis of the detection (:func:`raingauge.gauge.streaks.detect_streaks`): a
         streak is found where it reaches c and measured over where it reaches grow c.
+    slant_cos : array_like
+        cos(theta) of a streak slanted by a cross wind (:meth:`SampleVolume.wind_dimming`;
+        1: falling straight down) [-].  The drop crosses each pixel in cos(theta) of the
+        time, so the detection's per-pixel tests (Eq. 19 and the hysteresis that sets the
+        streak's extent) see the change cos(theta) beta (E_r - E_b).  The measurement works
+        on row sums across the streak: a slanted row holds the same signal over
+        1 / cos(theta) as many pixels, so the widths, ends and total change are measured as
+        those of an upright streak whose change is sqrt(cos(theta)) of it.
 
     Returns
     -------
@@ -239,6 +251,10 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
     motion = f * v_true * profile.exposure_s / z
     finite_c = np.isfinite(contrast)
     change = streak_change_dn(a_img, w_app, motion, np.where(finite_c, contrast, 1e6))
+    slant = np.asarray(slant_cos, dtype=float)
+    # (the detection's per-pixel change, and the change of the upright streak measured alike)
+    change_det = change * slant
+    change = change * np.sqrt(slant)
     plateau = change * w_app
     if width_sigma_px is None or motion_sigma_px is None:
         sw, sl = streak_errors_px(w_app, motion, plateau, noise_change)
@@ -267,10 +283,10 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
         with np.errstate(invalid="ignore"):
             p = p * np.where(np.isfinite(sw) & np.isfinite(rel), ndtr((q - q_min) / s_q), 0.0)
             s_q = np.where(np.isfinite(sw) & np.isfinite(rel), s_q, np.nan)
-    p_det = np.where(finite_c, detection_probability(change, w_app, threshold_dn=c, noise_sigma_dn=noise,
+    p_det = np.where(finite_c, detection_probability(change_det, w_app, threshold_dn=c, noise_sigma_dn=noise,
                                                      smooth_px=smooth_px, length_px=motion + w_app), 1.0)
     # the streak's extent is taken at the hysteresis threshold grow c (detect_streaks)
-    margin = np.where(finite_c, detection_margin(change, w_app, threshold_dn=grow * c, noise_sigma_dn=noise,
+    margin = np.where(finite_c, detection_margin(change_det, w_app, threshold_dn=grow * c, noise_sigma_dn=noise,
                                                  smooth_px=smooth_px), np.inf)
     p_size = sizing_probability(2.0 * a_img, margin, np.where(finite_c, row_snr(change, w_app, noise_change), np.inf))
     p = p * p_det * p_size
@@ -280,7 +296,7 @@ def pass_probability(radius_m: float, z_m, profile, *, velocity_model: str = "pa
         p_law = np.zeros_like(p_law)
     return {"p": p, "p_law": p_law, "p_detect": p_det, "apparent_radius_m": a_app,
             "apparent_velocity_m_s": v_app, "width_px": w, "blur_px": b, "motion_px": motion,
-            "change_dn": change, "q": q, "q_sigma": s_q}
+            "change_dn": change_det, "q": q, "q_sigma": s_q}
 
 
 #: Percentile of the law-abiding streaks' brightness samples that estimates E_r [%].
@@ -458,6 +474,12 @@ class SampleVolume:
     noise_factors : array, optional
         Noise grid of the table, in units of ``noise_sigma_dn`` (rain's own flicker raises
         the noise a streak is measured in, Eq. 27 [GargNayar2007]).
+    wind_m_s : float
+        The drops' drift across the image [m/s]: each size's streak slants by its own
+        angle, tan(theta) = u / v(a), and is tabled so (``slant_cos`` of
+        :func:`pass_probability`).  The gauge keeps the volume without wind and asks it
+        for the wind's (:meth:`in_wind`, the ``wind_m_s`` of :meth:`kappa` and the
+        others).
 
     Attributes
     ----------
@@ -511,6 +533,7 @@ class SampleVolume:
     noise_sigma_dn: float | None = None
     detection_threshold_dn: float | None = None
     noise_factors: np.ndarray = field(default_factory=lambda: np.array([1.0, 1.4, 2.0, 2.8, 4.0, 5.6]))
+    wind_m_s: float = 0.0
 
     def __post_init__(self):
         from raingauge.physics.camera import blur_circle_px
@@ -533,7 +556,12 @@ class SampleVolume:
         self._bracket_memo = None
         self._q_node_parts = []
         node_c = self.contrast_dn * 2.0 ** (0.5 * np.arange(BRIGHTNESS_Q_NODES[0], BRIGHTNESS_Q_NODES[1] + 1))
-        for a in self.radii_m:
+        self.wind_m_s = abs(float(self.wind_m_s))
+        slants = (self.wind_dimming(self.radii_m, self.wind_m_s) if self.wind_m_s > 0.0
+                  else np.ones(self.radii_m.size))
+        self._calm = None
+        self._windy = {}
+        for a, slant in zip(self.radii_m, slants.tolist()):
             # the accepted drops lie where the blur is at most about the width (q >= q_min):
             # integrate over that span, generously widened
             w_all = np.maximum(2.0 * f * a / z_all, 1.0)
@@ -547,7 +575,8 @@ class SampleVolume:
                                    k_sigma=self.k_sigma, blur_variance_factor=self.blur_variance_factor,
                                    defocus_model=self.defocus_model, q_min=self.q_min,
                                    contrast_dn=cgrid[None, :, None], noise_sigma_dn=self.noises_dn[:, None, None],
-                                   detection_threshold_dn=self.detection_threshold_dn, grow=self.grow)
+                                   detection_threshold_dn=self.detection_threshold_dn, grow=self.grow,
+                                   slant_cos=slant)
             wt = res["p"] * (z / f) ** 2 * dz
             k = wt.sum(axis=-1)                                  # (n_noises, n_contrasts + 1)
             # the depths where the drop passes at all, at any noise and contrast of the table
@@ -570,7 +599,8 @@ class SampleVolume:
                                          defocus_model=self.defocus_model, q_min=self.q_min,
                                          contrast_dn=node_c[None, :, None],
                                          noise_sigma_dn=self.noises_dn[:, None, None],
-                                         detection_threshold_dn=self.detection_threshold_dn, grow=self.grow)
+                                         detection_threshold_dn=self.detection_threshold_dn, grow=self.grow,
+                                         slant_cos=slant)
                 self._q_node_parts.append((a,) + tuple(x.astype(np.float32)
                                                        for x in _brightness_parts(res_n, zs, f, z0)))
             table.append(k)
@@ -733,7 +763,7 @@ class SampleVolume:
         i, t = self._noise_bracket(noise_dn)
         return (1.0 - t) * self.kappa_cube[:, i, :] + t * self.kappa_cube[:, i + 1, :]
 
-    def brightness_q_at(self, noise_dn=None, contrast_dn=None) -> float:
+    def brightness_q_at(self, noise_dn=None, contrast_dn=None, wind_m_s: float = 0.0) -> float:
         """:attr:`brightness_q` at a frame noise [gray levels] (linear between the grid's;
         default the profile's) and a drop contrast E_r - E_b [gray levels] (default
         ``contrast_dn``) [-].
@@ -744,7 +774,12 @@ class SampleVolume:
         contrasts than ``contrast_dn`` are computed on a grid of half octaves about it
         (:data:`BRIGHTNESS_Q_NODES`, each node when first needed), as the factor by which
         the percentile there differs from that at ``contrast_dn``, interpolated in log C.
+        In a cross wind of ``wind_m_s`` [m/s] that of the wind's volume (:meth:`in_wind`,
+        linear between the steps of :data:`WIND_STEP_M_S`).
         """
+        wind = abs(float(wind_m_s)) if wind_m_s is not None and np.isfinite(wind_m_s) else 0.0
+        if wind != self.wind_m_s:
+            return float(sum(t * vol.brightness_q_at(noise_dn, contrast_dn, vol.wind_m_s) for vol, t in self._wind_nodes(wind)))
         noise = None if noise_dn is None or not np.isfinite(noise_dn) else float(noise_dn)
         # the base and the noise grid's two nodes about the frame's noise (linear weights):
         # kept for the last noise (the drop brightness asks at one noise for many contrasts)
@@ -777,7 +812,7 @@ class SampleVolume:
         return float(base * factor)
 
     def brightness_q_population_factor(self, noise_dn, contrast_dn, flat_between,
-                                       prior_rate_mm_h: float | None = None) -> float:
+                                       prior_rate_mm_h: float | None = None, wind_m_s: float = 0.0) -> float:
         """q_ref of a Marshall-Palmer population of ``prior_rate_mm_h`` (default
         :data:`BRIGHTNESS_PRIOR_RATE_MM_H`, that of :attr:`brightness_q`) over that of drops
         spread uniformly in log a between the radii ``flat_between`` = (lo, hi) [m], at a
@@ -785,7 +820,15 @@ class SampleVolume:
         depths and q', linear between its nodes) [-].  The completeness probe measures the
         second population's percentile in the frames; this factor carries it to the first.
         The heavier the rain, the larger the share of big drops, whose streaks are measured
-        best, and the smaller the factor."""
+        best, and the smaller the factor.  In a cross wind of ``wind_m_s`` [m/s] the factor
+        of the wind's volume (:meth:`in_wind`, linear between the steps of
+        :data:`WIND_STEP_M_S`): the wind takes the small drops, which slant most, out of
+        both populations, and Marshall-Palmer's holds the more of them."""
+        wind = abs(float(wind_m_s)) if wind_m_s is not None and np.isfinite(wind_m_s) else 0.0
+        if wind != self.wind_m_s:
+            return float(sum(t * vol.brightness_q_population_factor(noise_dn, contrast_dn, flat_between,
+                                                                     prior_rate_mm_h, vol.wind_m_s)
+                             for vol, t in self._wind_nodes(wind)))
         if self.defocus_model != "uniform" or not self._q_node_parts:
             return 1.0
         c = self.contrast_dn if contrast_dn is None or not np.isfinite(contrast_dn) else float(contrast_dn)
@@ -825,6 +868,35 @@ class SampleVolume:
         self._q_nodes[key] = val
         return val
 
+    def in_wind(self, wind_m_s: float) -> "SampleVolume":
+        """The sample volume of the same camera and tests for drops drifting at ``wind_m_s``
+        [m/s] across the image (its ``wind_m_s``), built when first asked for and kept."""
+        calm = self if self._calm is None else self._calm
+        u = abs(float(wind_m_s))
+        if u == calm.wind_m_s:
+            return calm
+        vol = calm._windy.get(u)
+        if vol is None:
+            vol = replace(calm, wind_m_s=u)
+            vol._calm = calm
+            calm._windy[u] = vol
+        return vol
+
+    def _wind_nodes(self, wind_m_s) -> list:
+        """[(volume, weight)] of the winds of :data:`WIND_STEP_M_S` about ``wind_m_s`` [m/s]
+        (linear weights; one volume on a step, the calm one without wind)."""
+        calm = self if self._calm is None else self._calm
+        u = abs(float(wind_m_s)) if wind_m_s is not None and np.isfinite(wind_m_s) else 0.0
+        if u == 0.0:
+            return [(calm, 1.0)]
+        x = u / WIND_STEP_M_S
+        k = math.floor(x)
+        t = x - k
+        nodes = [(calm.in_wind(k * WIND_STEP_M_S), 1.0 - t)]
+        if t > 1e-9:
+            nodes.append((calm.in_wind((k + 1) * WIND_STEP_M_S), t))
+        return nodes
+
     def wind_dimming(self, radius_m, wind_m_s: float) -> np.ndarray:
         """Factor by which a cross wind dims a drop's streak, per pixel [-].
 
@@ -834,8 +906,9 @@ class SampleVolume:
         its change beta (E_r - E_b) is that of a straight streak at the contrast
         cos(theta) (E_r - E_b) (the end caps, which do not lengthen, are left out: a few
         per cent of a streak several widths long).  The row sums across the streak are
-        unchanged (its rows are wider by 1 / cos(theta)); the detection's per-pixel test
-        is not.
+        unchanged (its rows are wider by 1 / cos(theta)), their noise is not: the
+        detection's per-pixel tests see the change dimmed by cos(theta), the measurement
+        on the rows as if by sqrt(cos(theta)) (``slant_cos`` of :func:`pass_probability`).
         """
         from raingauge.physics.drops import fall_velocity
 
@@ -844,25 +917,6 @@ class SampleVolume:
         with np.errstate(divide="ignore", invalid="ignore"):
             r = float(wind_m_s) / v
         return np.where(np.isfinite(r), 1.0 / np.sqrt(1.0 + r * r), 0.0)
-
-    def _dimmed_weights(self, weights, factor) -> np.ndarray:
-        """Contrast weights (n_contrasts,) moved to the contrasts ``factor`` (K,) times theirs,
-        linear in log C as :meth:`contrast_weights` (mass below the grid is lost) -> (K, n_contrasts)."""
-        w = np.asarray(weights, dtype=float)
-        f = np.atleast_1d(np.asarray(factor, dtype=float))
-        grid = self._log_contrasts
-        n = grid.size
-        with np.errstate(divide="ignore"):
-            lc = grid[None, :] + np.log(np.maximum(f, 1e-300))[:, None]
-        seen = lc >= grid[0]
-        lc = _clip(lc, grid[0], grid[-1])
-        i = _clip(np.searchsorted(grid, lc.ravel(), side="right") - 1, 0, n - 2).reshape(lc.shape)
-        t = _clip((lc - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0)
-        mass = np.where(seen, w[None, :], 0.0)
-        row = (np.arange(f.size) * n)[:, None]
-        out = (np.bincount((row + i).ravel(), (mass * (1.0 - t)).ravel(), minlength=f.size * n)
-               + np.bincount((row + i + 1).ravel(), (mass * t).ravel(), minlength=f.size * n))
-        return out.reshape(f.size, n)
 
     def kappa(self, radius_m, contrast_dn=None, *, weights=None, noise_dn=None,
               wind_m_s: float = 0.0) -> np.ndarray:
@@ -880,24 +934,16 @@ class SampleVolume:
             The frame's noise [gray levels] (the change image's over sqrt(1.5); default the
             profile's).
         wind_m_s : float
-            The drops' drift across the image [m/s]: each size is seen at its streak's
-            dimmed contrast (:meth:`wind_dimming`).
+            The drops' drift across the image [m/s]: the kappa of the wind's volume
+            (:meth:`in_wind`; linear between the steps of :data:`WIND_STEP_M_S`), each size's
+            streak slanted by its own angle (:meth:`wind_dimming`).
         """
         a = np.asarray(radius_m, dtype=float)
-        wind = float(wind_m_s) if np.isfinite(wind_m_s) else 0.0
-        if wind != 0.0:
-            w = (self.contrast_weights([float(self.contrast_dn if contrast_dn is None else contrast_dn)])
-                 if weights is None else np.asarray(weights, dtype=float))
-            key = ("wind", w.tobytes(), None if noise_dn is None else float(noise_dn), wind)
-            cached = getattr(self, "_kappa_col", None)
-            if cached is not None and cached[0] == key:
-                col = cached[1]
-            else:
-                table = self._noise_slice(noise_dn)
-                dimmed = self._dimmed_weights(w, self.wind_dimming(self.radii_m, wind))
-                col = np.einsum("ij,ij->i", table, dimmed)
-                self._kappa_col = (key, col)
-        elif weights is None and contrast_dn is None and noise_dn is None:
+        wind = abs(float(wind_m_s)) if np.isfinite(wind_m_s) else 0.0
+        if wind != self.wind_m_s:
+            return sum(t * vol.kappa(a, contrast_dn, weights=weights, noise_dn=noise_dn, wind_m_s=vol.wind_m_s)
+                       for vol, t in self._wind_nodes(wind))
+        if weights is None and contrast_dn is None and noise_dn is None:
             col = self.kappa_m3_px2
         else:
             w = None if weights is None else np.asarray(weights, dtype=float)
@@ -1031,9 +1077,11 @@ class SampleVolume:
         wind_m_s : float
             The drops' drift across the image [m/s] (:meth:`wind_dimming`, as :meth:`kappa`).
         """
+        wind = abs(float(wind_m_s)) if np.isfinite(wind_m_s) else 0.0
+        if wind != self.wind_m_s:
+            return float(sum(t * vol.pass_probability_over(radius_m, z_m, weights, noise_dn, vol.wind_m_s)
+                             for vol, t in self._wind_nodes(wind)))
         w = np.asarray(weights, dtype=float)
-        if wind_m_s and np.isfinite(wind_m_s):
-            w = self._dimmed_weights(w, self.wind_dimming(radius_m, wind_m_s))[0]
         return float(w @ self._p_nodes(radius_m, z_m, noise_dn))
 
     def true_radius_m(self, apparent_radius_m) -> np.ndarray:
